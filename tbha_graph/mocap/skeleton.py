@@ -1,0 +1,167 @@
+"""The TBHA 16-joint body model: the one place joint names, order and hierarchy are defined.
+
+Conventions used across the whole mocap package (see also :mod:`tbha_graph.mocap.camera`):
+
+* World frame: metres, right-handed, **y up**. In the rest T-pose the actor faces **+z**,
+  so the actor's left side is **+x**.
+* Joint arrays have shape ``(n_frames, N_JOINTS, 3)`` (positions) or ``(n_frames, N_JOINTS, 2)``
+  (pixels), with joints in the order of :data:`JOINT_NAMES`.
+* The names below are used verbatim everywhere, BVH files included (``ROOT hips``).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+#: Joint names in array order. Index 0 is the root (pelvis / abdomen, the seed's "hip").
+JOINT_NAMES: tuple[str, ...] = (
+    "hips",
+    "chest",
+    "neck",
+    "head",
+    "left_shoulder",
+    "left_elbow",
+    "left_wrist",
+    "right_shoulder",
+    "right_elbow",
+    "right_wrist",
+    "left_hip",
+    "left_knee",
+    "left_ankle",
+    "right_hip",
+    "right_knee",
+    "right_ankle",
+)
+N_JOINTS = len(JOINT_NAMES)
+JOINT_INDEX: dict[str, int] = {name: i for i, name in enumerate(JOINT_NAMES)}
+
+#: Parent of each joint by name (root has None).
+PARENT_NAMES: dict[str, str | None] = {
+    "hips": None,
+    "chest": "hips",
+    "neck": "chest",
+    "head": "neck",
+    "left_shoulder": "chest",
+    "left_elbow": "left_shoulder",
+    "left_wrist": "left_elbow",
+    "right_shoulder": "chest",
+    "right_elbow": "right_shoulder",
+    "right_wrist": "right_elbow",
+    "left_hip": "hips",
+    "left_knee": "left_hip",
+    "left_ankle": "left_knee",
+    "right_hip": "hips",
+    "right_knee": "right_hip",
+    "right_ankle": "right_knee",
+}
+#: Parent index of each joint (``-1`` for the root), shape ``(N_JOINTS,)``.
+PARENTS: np.ndarray = np.array(
+    [-1 if PARENT_NAMES[n] is None else JOINT_INDEX[PARENT_NAMES[n]] for n in JOINT_NAMES], dtype=np.int64
+)
+#: Children of each joint, by index.
+CHILDREN: tuple[tuple[int, ...], ...] = tuple(
+    tuple(int(c) for c in np.flatnonzero(PARENTS == j)) for j in range(N_JOINTS)
+)
+#: Bones as (parent index, child index) pairs, shape ``(N_JOINTS - 1, 2)``.
+BONES: np.ndarray = np.array([(int(PARENTS[j]), j) for j in range(1, N_JOINTS)], dtype=np.int64)
+
+#: Joints that carry a coloured patch on the suit (all but the head, whose dark hair is its "patch").
+PATCHED_JOINTS: tuple[str, ...] = tuple(n for n in JOINT_NAMES if n != "head")
+N_PATCHES = len(PATCHED_JOINTS)
+
+#: The five torso points the coplanar Tsai calibration uses (seed 000, section 3.1).
+CALIBRATION_JOINTS: tuple[str, ...] = ("neck", "chest", "hips", "left_shoulder", "right_shoulder")
+
+#: The stable triangle the 3D reconstruction starts from (seed 000, section 3.2).
+TRIANGLE_JOINTS: tuple[str, ...] = ("chest", "left_shoulder", "right_shoulder")
+
+#: Typical adult bone lengths in metres (child joint name -> length of the bone from its parent).
+#: Used when the user gives no measurements; anatomical proportions for a ~1.75 m adult.
+DEFAULT_BONE_LENGTHS: dict[str, float] = {
+    "chest": 0.25,
+    "neck": 0.22,
+    "head": 0.15,
+    "left_shoulder": 0.21,
+    "left_elbow": 0.28,
+    "left_wrist": 0.25,
+    "right_shoulder": 0.21,
+    "right_elbow": 0.28,
+    "right_wrist": 0.25,
+    "left_hip": 0.11,
+    "left_knee": 0.42,
+    "left_ankle": 0.41,
+    "right_hip": 0.11,
+    "right_knee": 0.42,
+    "right_ankle": 0.41,
+}
+
+#: Unit direction of each bone (parent -> joint) in the rest T-pose, world frame, shape ``(N_JOINTS, 3)``.
+#: Row 0 (root) is zero. Arms point sideways (+x for the left arm), legs down, spine up; the shoulder
+#: joints sit up and out from the chest patch, the hip joints down and out from the pelvis.
+_TPOSE_DIRS = {
+    "hips": (0.0, 0.0, 0.0),
+    "chest": (0.0, 1.0, 0.0),
+    "neck": (0.0, 1.0, 0.0),
+    "head": (0.0, 1.0, 0.0),
+    "left_shoulder": (1.0, 0.5, 0.0),
+    "left_elbow": (1.0, 0.0, 0.0),
+    "left_wrist": (1.0, 0.0, 0.0),
+    "right_shoulder": (-1.0, 0.5, 0.0),
+    "right_elbow": (-1.0, 0.0, 0.0),
+    "right_wrist": (-1.0, 0.0, 0.0),
+    "left_hip": (1.0, -0.55, 0.0),
+    "left_knee": (0.0, -1.0, 0.0),
+    "left_ankle": (0.0, -1.0, 0.0),
+    "right_hip": (-1.0, -0.55, 0.0),
+    "right_knee": (0.0, -1.0, 0.0),
+    "right_ankle": (0.0, -1.0, 0.0),
+}
+TPOSE_DIRECTIONS: np.ndarray = np.array([_TPOSE_DIRS[n] for n in JOINT_NAMES], dtype=np.float64)
+_norm = np.linalg.norm(TPOSE_DIRECTIONS, axis=1, keepdims=True)
+TPOSE_DIRECTIONS = np.divide(TPOSE_DIRECTIONS, _norm, out=np.zeros_like(TPOSE_DIRECTIONS), where=_norm > 0)
+
+
+def topological_order() -> tuple[int, ...]:
+    """Joint indices ordered so that every parent comes before its children (root first)."""
+    order: list[int] = []
+    stack = [0]
+    while stack:
+        j = stack.pop()
+        order.append(j)
+        stack.extend(reversed(CHILDREN[j]))
+    return tuple(order)
+
+
+def bone_lengths_array(lengths: dict[str, float] | None = None) -> np.ndarray:
+    """Bone lengths as an array of shape ``(N_JOINTS,)`` metres, entry ``j`` = |joint j - parent(j)|.
+
+    Entry 0 (root) is 0. Missing names fall back to :data:`DEFAULT_BONE_LENGTHS`.
+    Raises ``KeyError`` naming an unknown joint.
+    """
+    merged = dict(DEFAULT_BONE_LENGTHS)
+    for name, value in (lengths or {}).items():
+        if name not in JOINT_INDEX or name == "hips":
+            raise KeyError(f"unknown bone {name!r}: bones are named by their child joint, one of {JOINT_NAMES[1:]}")
+        merged[name] = float(value)
+    out = np.zeros(N_JOINTS)
+    for name, value in merged.items():
+        out[JOINT_INDEX[name]] = value
+    return out
+
+
+def measure_bone_lengths(joints: np.ndarray) -> np.ndarray:
+    """Bone lengths measured from positions ``(..., N_JOINTS, 3)``; returns ``(..., N_JOINTS)`` (root 0)."""
+    joints = np.asarray(joints, dtype=np.float64)
+    parent = np.where(PARENTS < 0, 0, PARENTS)
+    d = np.linalg.norm(joints - joints[..., parent, :], axis=-1)
+    d[..., 0] = 0.0
+    return d
+
+
+def tpose(lengths: np.ndarray | None = None, root: tuple[float, float, float] = (0.0, 0.95, 0.0)) -> np.ndarray:
+    """Joint positions ``(N_JOINTS, 3)`` metres, world frame, of the rest T-pose facing +z."""
+    lengths = bone_lengths_array() if lengths is None else np.asarray(lengths, dtype=np.float64)
+    pos = np.zeros((N_JOINTS, 3))
+    pos[0] = root
+    for j in topological_order()[1:]:
+        pos[j] = pos[PARENTS[j]] + lengths[j] * TPOSE_DIRECTIONS[j]
+    return pos
