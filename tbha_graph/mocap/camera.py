@@ -14,6 +14,21 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from pydantic import BaseModel, Field
+
+
+class CameraModel(BaseModel):
+    """A camera as data (what flows between nodes and is written to files): see :class:`Camera`."""
+
+    K: list[list[float]] = Field(description="3x3 intrinsics, pixels")
+    R: list[list[float]] = Field(description="3x3 rotation, world -> camera")
+    t: list[float] = Field(description="translation, world -> camera, metres")
+    width: int = Field(gt=0, description="image width, pixels")
+    height: int = Field(gt=0, description="image height, pixels")
+    dist: list[float] = Field(default_factory=lambda: [0.0] * 5, description="OpenCV distortion (k1, k2, p1, p2, k3)")
+
+    def camera(self) -> "Camera":
+        return Camera.from_dict(self.model_dump())
 
 
 @dataclass(frozen=True)
@@ -116,6 +131,9 @@ class Camera:
             "height": self.height,
             "dist": self.dist.tolist(),
         }
+
+    def to_model(self) -> CameraModel:
+        return CameraModel(**self.to_dict())
 
     @classmethod
     def from_dict(cls, d: dict) -> "Camera":
