@@ -1,0 +1,1 @@
+"""Input/output nodes and readers: BVH files, skeleton mappings, videos."""
