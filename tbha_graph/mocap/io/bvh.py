@@ -146,10 +146,10 @@ class _Tokens:
         self.i += 1
         return tok
 
-    def expect(self, word: str) -> int:
+    def expect(self, word: str, where: str = "") -> int:
         tok, line = self.next(f"'{word}'")
         if tok.upper() != word.upper():
-            raise self.error(f"expected '{word}', found '{tok}'", line)
+            raise self.error(f"{where}expected '{word}', found '{tok}'", line)
         return line
 
     def number(self, what: str) -> float:
@@ -167,10 +167,11 @@ class _Tokens:
 
 
 def _parse_joint(t: _Tokens, name: str, parent: int, joints: list[BvhJoint]) -> None:
-    t.expect("{")
-    t.expect("OFFSET")
+    where = f"joint '{name}': "
+    t.expect("{", where)
+    t.expect("OFFSET", where)
     offset = t.vec3("OFFSET")
-    t.expect("CHANNELS")
+    t.expect("CHANNELS", where)
     n_tok, n_line = t.next("the channel count")
     if not n_tok.isdigit():
         raise t.error(f"expected the channel count after CHANNELS, found '{n_tok}'", n_line)
@@ -206,10 +207,11 @@ def _parse_joint(t: _Tokens, name: str, parent: int, joints: list[BvhJoint]) -> 
                 t.next("'Site'")
             if joints[index].end_site is not None:
                 raise t.error(f"joint '{name}' has two End Sites", line)
-            t.expect("{")
-            t.expect("OFFSET")
+            where = f"End Site of joint '{name}': "
+            t.expect("{", where)
+            t.expect("OFFSET", where)
             joints[index].end_site = t.vec3("End Site OFFSET")
-            t.expect("}")
+            t.expect("}", where)
         else:
             raise t.error(f"inside joint '{name}': expected 'JOINT', 'End Site' or '}}', found '{word}'", line)
 
@@ -265,7 +267,8 @@ def read_bvh(path: str | Path) -> Bvh:
             break
         toks.extend((w, k + 1) for w in words)
     if motion_line is None:
-        raise BvhError("no MOTION section found", location=Location(file, len(lines)),
+        last = max((k + 1 for k, s in enumerate(lines) if s.strip()), default=1)
+        raise BvhError("no MOTION section found", location=Location(file, last),
                        hint="a BVH file has a HIERARCHY, then 'MOTION', 'Frames: N', 'Frame Time: T'")
     t = _Tokens(toks, file, motion_line + 1)
     t.expect("HIERARCHY")
