@@ -274,3 +274,76 @@ def test_writer_is_atomic_and_refuses_bad_motion(tmp_path: Path) -> None:
         write_bvh(path, bad)
     assert path.read_bytes() == before  # nothing partial written
     assert [p.name for p in tmp_path.iterdir()] == ["good.bvh"]
+
+
+# ---------------------------------------------------------------------------------------------
+# export.bvh node on real CMU-derived motion
+# ---------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def cmu_rotations() -> dict[str, np.ndarray]:
+    from tbha_graph.mocap.io.skeleton_map import rotations16_from_bvh
+
+    rot = rotations16_from_bvh(CMU_DIR / "131_01.bvh")
+    rot["local_quat"] = rot["local_quat"][::3].copy()
+    rot["root_position"] = rot["root_position"][::3].copy()
+    rot["fps"] = np.asarray(40.0)
+    return rot
+
+
+def _fk_in(rot: dict[str, np.ndarray]) -> np.ndarray:
+    from tbha_graph.mocap.kinematics import forward_kinematics
+    from tbha_graph.mocap.skeleton import PARENTS
+
+    return forward_kinematics(PARENTS, rot["offsets"], rot["local_quat"], rot["root_position"])[0]
+
+
+def test_export_bvh_writes_the_16_joint_skeleton(cmu_rotations: dict[str, np.ndarray]) -> None:
+    from tbha_graph.core.testing import run_node
+    from tbha_graph.mocap.export.bvh import export_bvh
+    from tbha_graph.mocap.skeleton import JOINT_NAMES, PARENTS
+
+    path = run_node(export_bvh, {}, rotations=cmu_rotations)["bvh"]
+    assert path.name == "motion.bvh"
+    bvh = read_bvh(path)
+    assert bvh.names == list(JOINT_NAMES) and np.array_equal(bvh.parents, PARENTS)
+    assert bvh.joints[0].channels == ("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation")
+    assert all(j.channels == ("Zrotation", "Xrotation", "Yrotation") for j in bvh.joints[1:])
+    leaves = {j.name for j in bvh.joints if j.end_site is not None}
+    assert leaves == {"head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"}
+    assert bvh.n_frames == 240 and bvh.fps == pytest.approx(40.0)
+    # metres, and every joint where the input's forward kinematics puts it (0.1 mm)
+    assert np.abs(bvh_positions(bvh) - _fk_in(cmu_rotations)).max() < 1e-4
+    # rest pose is the T-pose: left arm along +x, legs down
+    assert bvh.offsets[JOINT_NAMES.index("left_elbow")][0] > 0.2
+    assert bvh.offsets[JOINT_NAMES.index("right_elbow")][0] < -0.2
+    assert bvh.offsets[JOINT_NAMES.index("left_knee")][1] < -0.35
+
+
+def test_export_bvh_scale_and_order(cmu_rotations: dict[str, np.ndarray]) -> None:
+    from tbha_graph.core.testing import run_node
+    from tbha_graph.mocap.export.bvh import export_bvh
+
+    path = run_node(export_bvh, {"scale": 100, "rotation_order": "YXZ"}, rotations=cmu_rotations)["bvh"]
+    bvh = read_bvh(path)
+    assert bvh.joints[3].channels == ("Yrotation", "Xrotation", "Zrotation")
+    assert np.abs(bvh_positions(bvh) / 100 - _fk_in(cmu_rotations)).max() < 1e-4
+    with pytest.raises(Exception, match="rotation_order"):
+        run_node(export_bvh, {"rotation_order": "ZXX"}, rotations=cmu_rotations)
+
+
+def test_export_bvh_self_check_fails_when_too_few_decimals(cmu_rotations: dict[str, np.ndarray]) -> None:
+    from tbha_graph.core.testing import run_node
+    from tbha_graph.mocap.export.bvh import export_bvh
+
+    with pytest.raises(NodeError, match="self-check failed.*mm"):
+        run_node(export_bvh, {"precision": 2}, rotations=cmu_rotations)
+
+
+def test_export_bvh_refuses_a_broken_rotation(cmu_rotations: dict[str, np.ndarray]) -> None:
+    from tbha_graph.core.testing import run_node
+    from tbha_graph.mocap.export.bvh import export_bvh
+
+    bad = dict(cmu_rotations, local_quat=cmu_rotations["local_quat"].copy())
+    bad["local_quat"][3, 5] = np.nan
+    with pytest.raises(NodeError, match="'left_elbow' on frame 3"):
+        run_node(export_bvh, {}, rotations=bad)

@@ -135,3 +135,24 @@ def test_bad_mapping_files(tmp_path: Path, old: str, new: str, word: str) -> Non
 def test_unknown_mapping_name() -> None:
     with pytest.raises(MappingError, match="did you mean 'cmu'"):
         load_mapping("cmuu")
+
+
+def test_rotations16_from_cmu(walk: dict[str, np.ndarray]) -> None:
+    """ROTATIONS derived from a CMU clip: identity = T-pose, legs reproduce the clip exactly."""
+    from tbha_graph.mocap.io.skeleton_map import rotations16_from_bvh
+    from tbha_graph.mocap.kinematics import forward_kinematics
+    from tbha_graph.mocap.skeleton import PARENTS, TPOSE_DIRECTIONS
+
+    rot = rotations16_from_bvh(CMU / "131_02.bvh")
+    assert rot["local_quat"].shape == (720, 16, 4) and float(rot["fps"]) == pytest.approx(120, rel=1e-4)
+    fk = forward_kinematics(PARENTS, rot["offsets"], rot["local_quat"], rot["root_position"])[0]
+    err_mm = np.linalg.norm(fk - walk["joints"], axis=-1) * 1000
+    legs = [JOINT_INDEX[n] for n in ("hips", "left_hip", "left_knee", "left_ankle", "right_hip", "right_knee", "right_ankle")]
+    assert err_mm[:, legs].max() < 1e-6
+    # the upper body follows the clip up to the spine bend the 16-joint model cannot represent
+    assert err_mm.max() < 80
+    # limb bones lie along their T-pose directions in the rest offsets
+    for name in ("left_elbow", "left_wrist", "right_elbow", "right_wrist", "left_knee", "left_ankle"):
+        j = JOINT_INDEX[name]
+        assert np.dot(rot["offsets"][j], TPOSE_DIRECTIONS[j]) / np.linalg.norm(rot["offsets"][j]) > 0.9999
+    assert rot["end_offsets"][JOINT_INDEX["left_ankle"], 2] > 0.1  # the foot points forward (+z)

@@ -363,7 +363,7 @@ def write_bvh(path: str | Path, bvh: Bvh, precision: int = 6) -> Path:
     out: list[str] = ["HIERARCHY"]
 
     def vec(v: np.ndarray) -> str:
-        return " ".join(f"{float(x):.{p}f}" for x in v)
+        return " ".join(f"{float(x):.{p}f}" for x in np.round(v, p) + 0.0)  # + 0.0: no "-0.000"
 
     def emit(i: int, depth: int) -> None:
         j = bvh.joints[i]
@@ -386,7 +386,7 @@ def write_bvh(path: str | Path, bvh: Bvh, precision: int = 6) -> Path:
         raise ValueError("motion holds NaN or infinite values")
     out += ["MOTION", f"Frames: {motion.shape[0]}", f"Frame Time: {float(bvh.frame_time)!r}"]
     row = " ".join([f"%.{p}f"] * motion.shape[1])
-    out.extend(row % tuple(r) for r in motion.tolist())
+    out.extend(row % tuple(r) for r in (np.round(motion, p) + 0.0).tolist())
     atomic_write_bytes(path, ("\n".join(out) + "\n").encode("ascii"))
     return path
 

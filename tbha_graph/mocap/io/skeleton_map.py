@@ -197,3 +197,87 @@ def motion16_from_bvh(path: str | Path, mapping: str | Path = "cmu",
         "fps": np.asarray(bvh.fps, dtype=np.float64),
         "joint_names": np.array(JOINT_NAMES),
     }
+
+
+#: Rest T-pose direction of the End Site of each leaf joint (head up, hands along the arms, feet forward).
+_TPOSE_END_DIRS = {
+    "head": (0.0, 1.0, 0.0),
+    "left_wrist": (1.0, 0.0, 0.0),
+    "right_wrist": (-1.0, 0.0, 0.0),
+    "left_ankle": (0.0, 0.0, 1.0),
+    "right_ankle": (0.0, 0.0, 1.0),
+}
+
+
+def _end_vector(bvh: Bvh, src: int, rest: np.ndarray) -> np.ndarray:
+    """Rest vector (file units) from source joint ``src`` to the End Site reached by following first children."""
+    parents = bvh.parents
+    j = src
+    while bvh.joints[j].end_site is None:
+        kids = np.flatnonzero(parents == j)
+        if kids.size == 0:
+            return np.zeros(3)
+        j = int(kids[0])
+    return rest[j] + bvh.joints[j].end_site - rest[src]
+
+
+def rotations16_from_bvh(path: str | Path, mapping: str | Path = "cmu",
+                         units_to_metres: float | None = None) -> dict[str, np.ndarray]:
+    """Joint rotations of the 16-joint model derived from a BVH file (a ``ROTATIONS`` bundle, metres).
+
+    Each TBHA joint takes the world rotation of its mapped source joint, re-expressed so that identity
+    is the TBHA rest T-pose (arms along +-x, legs down, spine up; branching joints are best-fit aligned):
+    ``offsets[c] = B[p] @ rest_vector[c]``, ``world[j] = world_src[j] @ B[j]^-1``. Limb joints reproduce
+    the source positions exactly; joints past a rotating source joint that the 16-joint model lacks
+    (the spine's lowerback/Chest, the lowerneck) differ by the bend of that joint. Returns
+    ``local_quat`` (n, 16, 4) xyzw, ``root_position`` (n, 3), ``offsets`` (16, 3), ``end_offsets``
+    (16, 3), ``fps`` ().
+    """
+    from scipy.spatial.transform import Rotation
+
+    from ..kinematics import forward_kinematics, quat_inv, quat_mul
+    from ..skeleton import CHILDREN, PARENTS, TPOSE_DIRECTIONS
+    from .bvh import bvh_to_local
+
+    m = load_mapping(mapping)
+    bvh = read_bvh(path)
+    idx = joint_indices(bvh, m, str(path))
+    scale = (m.units_to_metres if units_to_metres is None else float(units_to_metres))
+    axes = Rotation.from_matrix(m.world_from_source())
+    local_src, root_src = bvh_to_local(bvh)
+    n, nj = bvh.n_frames, len(bvh.joints)
+    rest = forward_kinematics(bvh.parents, bvh.offsets, np.tile([0.0, 0.0, 0.0, 1.0], (1, nj, 1)), np.zeros((1, 3)))[0][0]
+    _, world_src = forward_kinematics(bvh.parents, bvh.offsets, local_src, root_src)
+    rest_w = axes.apply(rest[idx]) * scale  # (16, 3) metres, world axes
+    world = (axes * Rotation.from_quat(world_src[:, idx].reshape(-1, 4)) * axes.inv()).as_quat().reshape(n, 16, 4)
+
+    offsets = np.zeros((16, 3))
+    end_offsets = np.zeros((16, 3))
+    b_quat = np.tile([0.0, 0.0, 0.0, 1.0], (16, 1))
+    for j in range(16):
+        kids = CHILDREN[j]
+        if kids:
+            vec = rest_w[list(kids)] - rest_w[j]
+            target = TPOSE_DIRECTIONS[list(kids)] * np.linalg.norm(vec, axis=1, keepdims=True)
+        else:
+            vec = axes.apply(_end_vector(bvh, int(idx[j]), rest))[None] * scale
+            target = np.array([_TPOSE_END_DIRS[JOINT_NAMES[j]]]) * np.linalg.norm(vec)
+        if np.linalg.norm(vec) > 0:
+            b = Rotation.align_vectors(target, vec)[0]
+            b_quat[j] = b.as_quat()
+            if not kids:
+                end_offsets[j] = b.apply(vec[0])
+        for c in kids:
+            offsets[c] = Rotation.from_quat(b_quat[j]).apply(rest_w[c] - rest_w[j])
+    world = quat_mul(world, quat_inv(b_quat))
+    parent_world = world[:, np.maximum(PARENTS, 0)]
+    local = quat_mul(quat_inv(parent_world), world)
+    local[:, 0] = world[:, 0]
+    root_position = axes.apply(root_src) * scale
+    return {
+        "local_quat": local,
+        "root_position": root_position,
+        "offsets": offsets,
+        "end_offsets": end_offsets,
+        "fps": np.asarray(bvh.fps, dtype=np.float64),
+    }

@@ -1,0 +1,1 @@
+"""Export nodes: write results in formats other software reads (BVH, ...)."""
