@@ -1,0 +1,52 @@
+"""Shared pieces of the command-line tools: error printing without tracebacks, exit codes."""
+from __future__ import annotations
+
+import sys
+from typing import Any, Callable
+
+from ..core.errors import NodeFailed, PipelineErrors, TbhaError
+
+EXIT_OK, EXIT_FAILED, EXIT_USER = 0, 1, 2
+
+
+def guarded(fn: Callable[[], int]) -> int:
+    """Run a CLI body; user errors print as messages (exit 2), node failures exit 1, ^C exits 130."""
+    try:
+        return fn()
+    except PipelineErrors as e:
+        print(f"error: {e.format()}", file=sys.stderr)
+        return EXIT_USER
+    except NodeFailed as e:
+        print(f"error: {e.format()}", file=sys.stderr)
+        return EXIT_FAILED
+    except TbhaError as e:
+        print(f"error: {e.format()}", file=sys.stderr)
+        return EXIT_USER
+    except KeyboardInterrupt:
+        print("interrupted; what finished is in the cache, run the same command to resume", file=sys.stderr)
+        return 130
+
+
+def parse_assignments(items: list[str] | None, what: str) -> dict[str, Any]:
+    from ..core.spec import parse_assignment
+
+    out: dict[str, Any] = {}
+    for item in items or []:
+        k, v = parse_assignment(item, what)
+        out[k] = v
+    return out
+
+
+def add_run_arguments(p) -> None:
+    p.add_argument("pipeline", help="pipeline YAML file")
+    p.add_argument("--out", "-o", help="run directory (default: runs/<pipeline name>)")
+    p.add_argument("--set", "-s", action="append", metavar="NODE.PARAM=VALUE", help="override a param (repeatable)")
+    p.add_argument("--var", "-v", action="append", metavar="NAME=VALUE", help="set a pipeline variable (repeatable)")
+    p.add_argument("--output", action="append", metavar="NAME", help="produce only these outputs (default: all)")
+    p.add_argument("--executor", choices=["local", "dask"], default="local", help="where nodes run (dask: a LocalCluster unless --scheduler)")
+    p.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="address of an existing Dask scheduler (implies --executor dask)")
+    p.add_argument("--workers", type=int, help="workers of the LocalCluster (dask executor)")
+    p.add_argument("--no-cache", action="store_true", help="run everything, read and write no cache")
+    p.add_argument("--cache-dir", help="cache folder (default: $TBHA_CACHE_DIR or the user cache folder)")
+    p.add_argument("--plugin", action="append", metavar="MODULE", help="also register the nodes of this importable module")
+    p.add_argument("--quiet", "-q", action="store_true", help="print only errors and the summary")

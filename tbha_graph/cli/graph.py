@@ -1,0 +1,200 @@
+"""``tbha-graph``: inspect nodes and pipelines, run studies, manage the cache.
+
+    tbha-graph nodes [TYPE]          list node types, or one type's ports, params and docstring
+    tbha-graph validate FILE...      check pipelines without running (all problems at once)
+    tbha-graph show FILE [--format text|mermaid|dot] [--png OUT.png]
+    tbha-graph schema                JSON Schema of pipeline files for editors
+    tbha-graph run FILE ...          same as tbha-run
+    tbha-graph study STUDY.yaml      run an ablation study, write results.csv / results.md
+    tbha-graph cache info|clear|gc   the content-addressed cache
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from ..core.cache import Cache
+from ..core.errors import RegistryError
+from ..core.progress import Reporter
+from ..core.registry import default_registry, load_plugin_modules
+from ..core.runner import load_graph
+from .common import EXIT_FAILED, EXIT_OK, add_run_arguments, guarded, parse_assignments
+
+
+def _registry(args):
+    reg = default_registry()
+    if getattr(args, "plugin", None):
+        load_plugin_modules(args.plugin, reg)
+    return reg
+
+
+def cmd_nodes(args) -> int:
+    reg = _registry(args)
+    if args.type:
+        print(describe_node(reg.get(args.type)))
+        return EXIT_OK
+    for spec in reg.specs():
+        print(f"{spec.type:<32} {spec.summary}")
+    for f in reg.failures:
+        print(f, file=sys.stderr)
+    return EXIT_OK
+
+
+def describe_node(spec) -> str:
+    lines = [f"{spec.type}  (version {spec.version}, from {spec.source or '?'}, {spec.module})", ""]
+    lines += ["  " + ln for ln in (spec.doc or "(no description)").splitlines()]
+    lines += ["", "inputs:"]
+    for name, i in spec.inputs.items():
+        lines.append(f"  {name:<18} {i.type.describe()}{'' if i.required else '  (optional)'}{('  ' + i.type.doc) if getattr(i.type, 'doc', '') else ''}")
+    if not spec.inputs:
+        lines.append("  (none)")
+    lines.append("outputs:")
+    for name, t in spec.outputs.items():
+        lines.append(f"  {name:<18} {t.describe()}{('  ' + t.doc) if getattr(t, 'doc', '') else ''}")
+    lines.append("params:")
+    fields = spec.params.model_fields
+    if not fields:
+        lines.append("  (none)")
+    for name, f in fields.items():
+        default = "required" if f.is_required() else f"default {json.dumps(f.get_default(call_default_factory=True), default=str)}"
+        extra = f.json_schema_extra if isinstance(f.json_schema_extra, dict) else {}
+        unit = f" [{extra['unit']}]" if extra.get("unit") else ""
+        cons = " ".join(str(m) for m in f.metadata if not callable(m) and "FileContent" not in str(m))
+        lines.append(f"  {name:<18} {default}{unit}{('  ' + cons) if cons else ''}")
+        if f.description:
+            lines.append(f"  {'':<18}   {f.description}")
+    return "\n".join(lines)
+
+
+def cmd_validate(args) -> int:
+    reg = _registry(args)
+    status = EXIT_OK
+    for path in args.files:
+        try:
+            g = load_graph(path, sets=parse_assignments(args.set, "--set"), vars=parse_assignments(args.var, "--var"), registry=reg)
+            print(f"{path}: ok ({len(g.nodes)} nodes, {len(g.outputs)} outputs)")
+        except Exception as e:  # noqa: BLE001 - report each file and go on
+            from ..core.errors import TbhaError
+
+            if not isinstance(e, TbhaError):
+                raise
+            print(f"{path}: {e.format()}", file=sys.stderr)
+            status = 2
+    return status
+
+
+def cmd_show(args) -> int:
+    from ..core import show
+
+    g = load_graph(args.file, sets=parse_assignments(args.set, "--set"), vars=parse_assignments(args.var, "--var"), registry=_registry(args))
+    text = {"text": show.as_text, "mermaid": show.as_mermaid, "dot": show.as_dot}[args.format](g)
+    print(text)
+    if args.png:
+        show.save_png(g, Path(args.png))
+        print(f"wrote {args.png}", file=sys.stderr)
+    return EXIT_OK
+
+
+def cmd_schema(args) -> int:
+    from ..core.schema import pipeline_schema
+
+    text = json.dumps(pipeline_schema(_registry(args)), indent=2)
+    if args.out:
+        Path(args.out).write_text(text)
+    else:
+        print(text)
+    return EXIT_OK
+
+
+def cmd_study(args) -> int:
+    from ..core.study import run_study, to_markdown
+
+    _registry(args)
+    out = Path(args.out) if args.out else Path("runs") / "studies" / Path(args.study).stem
+    cache = Cache(args.cache_dir) if args.cache_dir else Cache()
+    rows = run_study(args.study, out, cache=cache, reporter=Reporter(quiet=args.quiet), executor=args.executor)
+    print(to_markdown(rows))
+    print(f"tables: {out / 'results.csv'}, {out / 'results.md'}")
+    return EXIT_OK if all(r["status"] == "ok" for r in rows) else EXIT_FAILED
+
+
+def cmd_cache(args) -> int:
+    cache = Cache(args.cache_dir) if args.cache_dir else Cache()
+    if args.action == "info":
+        info = cache.info()
+        print(f"cache folder: {info['root']}\nentries: {info['entries']}\nsize: {info['bytes'] / 1e6:.1f} MB\nunfinished writes: {info['tmp_folders']}")
+    elif args.action == "clear":
+        print(f"removed {cache.clear()} entries from {cache.root}")
+    else:
+        max_bytes = int(float(args.max_size_mb) * 1e6) if args.max_size_mb else None
+        print(json.dumps(cache.gc(older_than_days=args.older_than_days, max_bytes=max_bytes)))
+    return EXIT_OK
+
+
+def cmd_run(args) -> int:
+    from .run import run_command
+
+    return run_command(args)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="tbha-graph", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("nodes", help="list node types or describe one")
+    s.add_argument("type", nargs="?")
+    s.add_argument("--plugin", action="append")
+    s.set_defaults(fn=cmd_nodes)
+
+    s = sub.add_parser("validate", help="check pipeline files without running them")
+    s.add_argument("files", nargs="+")
+    s.add_argument("--set", action="append")
+    s.add_argument("--var", action="append")
+    s.add_argument("--plugin", action="append")
+    s.set_defaults(fn=cmd_validate)
+
+    s = sub.add_parser("show", help="print the DAG (text, Mermaid, DOT) and optionally draw a PNG")
+    s.add_argument("file")
+    s.add_argument("--format", choices=["text", "mermaid", "dot"], default="text")
+    s.add_argument("--png", help="also draw the DAG into this PNG")
+    s.add_argument("--set", action="append")
+    s.add_argument("--var", action="append")
+    s.add_argument("--plugin", action="append")
+    s.set_defaults(fn=cmd_show)
+
+    s = sub.add_parser("schema", help="JSON Schema of pipeline files (for editors)")
+    s.add_argument("--out", help="write to this file instead of stdout")
+    s.add_argument("--plugin", action="append")
+    s.set_defaults(fn=cmd_schema)
+
+    s = sub.add_parser("run", help="run a pipeline (same as tbha-run)")
+    add_run_arguments(s)
+    s.set_defaults(fn=cmd_run)
+
+    s = sub.add_parser("study", help="run an ablation study")
+    s.add_argument("study")
+    s.add_argument("--out", "-o")
+    s.add_argument("--cache-dir")
+    s.add_argument("--executor", choices=["local", "dask"], default="local")
+    s.add_argument("--plugin", action="append")
+    s.add_argument("--quiet", "-q", action="store_true")
+    s.set_defaults(fn=cmd_study)
+
+    s = sub.add_parser("cache", help="inspect or clean the cache")
+    s.add_argument("action", choices=["info", "clear", "gc"])
+    s.add_argument("--cache-dir")
+    s.add_argument("--older-than-days", type=float, help="gc: remove entries unused for this long")
+    s.add_argument("--max-size-mb", type=float, help="gc: remove least recently used entries beyond this size")
+    s.set_defaults(fn=cmd_cache)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return guarded(lambda: args.fn(args))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,238 @@
+"""The content-addressed cache: one folder per node evaluation, never pickle, never half-written.
+
+Layout under the cache root (``TBHA_CACHE_DIR`` or the platform's user cache folder)::
+
+    entries/<k[:2]>/<key>/meta.json         what the entry holds, with a SHA-256 of every file
+    entries/<k[:2]>/<key>/<port><suffix>    one file per output port (.npz, .json or the file itself)
+    tmp/<random>/                           entries being written
+
+An entry is written completely into ``tmp/`` and then renamed into place (atomic on one file system):
+a killed writer leaves only a ``tmp/`` folder (removed by ``gc``), never a half entry. Two writers of
+the same key: the first rename wins, the second discards its copy. A file whose checksum no longer
+matches ``meta.json`` is reported as corrupt, the entry is removed and the node runs again.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import sys
+import time
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+from .errors import CacheError
+from .types import AnyOf, AnyType, File, PortType, concrete_type_of, hash_file, storage_type
+
+
+def default_cache_dir() -> Path:
+    """``$TBHA_CACHE_DIR``, else ``$XDG_CACHE_HOME/tbha-graph`` (``~/.cache``), ``~/Library/Caches`` on
+    macOS, ``%LOCALAPPDATA%`` on Windows."""
+    env = os.environ.get("TBHA_CACHE_DIR")
+    if env:
+        return Path(env).expanduser()
+    if sys.platform == "darwin":
+        return Path.home() / "Library" / "Caches" / "tbha-graph"
+    if os.name == "nt":
+        return Path(os.environ.get("LOCALAPPDATA", Path.home())) / "tbha-graph" / "Cache"
+    return Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "tbha-graph"
+
+
+class CorruptEntry(CacheError):
+    """A cache entry failed its checksum or could not be parsed."""
+
+
+@dataclass
+class Entry:
+    """A complete cache entry: its folder and parsed ``meta.json``."""
+
+    key: str
+    path: Path
+    meta: dict
+
+    def fingerprint(self, port: str) -> str:
+        return self.meta["outputs"][port]["fingerprint"]
+
+    def load(self, port: str, declared: PortType) -> Any:
+        """Load one output, verifying its checksum first."""
+        info = self.meta["outputs"][port]
+        f = self.path / info["file"]
+        try:
+            digest = hash_file(f)
+        except OSError as e:
+            raise CorruptEntry(f"cache entry {self.key[:12]}: cannot read {f.name}: {e}") from None
+        if digest != info["sha256"]:
+            raise CorruptEntry(f"cache entry {self.key[:12]}: checksum mismatch in {f.name}")
+        t = declared
+        if isinstance(declared, (AnyOf, AnyType)):
+            t = _stored_type(declared, info["storage"])
+        try:
+            return t.load(f)
+        except Exception as e:  # noqa: BLE001 - any parse failure of stored data is corruption
+            raise CorruptEntry(f"cache entry {self.key[:12]}: cannot load {f.name}: {e}") from None
+
+
+def _stored_type(declared: PortType, storage: str) -> PortType:
+    if isinstance(declared, AnyOf):
+        for o in declared.options:
+            if type(o).__name__ == storage:
+                return o
+    return storage_type(storage)
+
+
+class Cache:
+    """A cache rooted at ``root`` (created on first write)."""
+
+    #: test seam: called after payload files are written and before meta/rename (simulates a crash)
+    after_payload_hook: Callable[[Path], None] | None = None
+
+    def __init__(self, root: Path | str | None = None):
+        self.root = Path(root) if root is not None else default_cache_dir()
+        self.entries = self.root / "entries"
+        self.tmp = self.root / "tmp"
+
+    def _entry_dir(self, key: str) -> Path:
+        return self.entries / key[:2] / key
+
+    # --- reading ------------------------------------------------------------------------------
+    def lookup(self, key: str) -> Entry | None:
+        """The complete entry for ``key``, or None. An unreadable meta.json counts as corrupt."""
+        d = self._entry_dir(key)
+        try:
+            with open(d / "meta.json", "rb") as f:
+                raw = f.read()
+        except FileNotFoundError:
+            return None
+        except OSError as e:
+            raise CorruptEntry(f"cache entry {key[:12]}: cannot read meta.json: {e}") from None
+        try:
+            meta = json.loads(raw)
+        except ValueError:
+            raise CorruptEntry(f"cache entry {key[:12]}: meta.json is not valid JSON") from None
+        return Entry(key, d, meta)
+
+    def remove(self, key: str) -> None:
+        """Remove an entry (rename away first, so readers never see it half-deleted)."""
+        d = self._entry_dir(key)
+        if not d.exists():
+            return
+        self.tmp.mkdir(parents=True, exist_ok=True)
+        trash = self.tmp / f"trash-{uuid.uuid4().hex}"
+        try:
+            os.replace(d, trash)
+        except OSError:
+            return
+        shutil.rmtree(trash, ignore_errors=True)
+
+    # --- writing ------------------------------------------------------------------------------
+    def store(self, key: str, outputs: dict[str, tuple[PortType, Any]], info: dict) -> tuple[Entry, dict[str, Any]]:
+        """Write a complete entry for ``key`` atomically. ``outputs``: port -> (declared type, value).
+
+        Returns the entry and the stored values (File outputs become paths inside the entry)."""
+        self.tmp.mkdir(parents=True, exist_ok=True)
+        work = self.tmp / f"{key[:16]}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+        work.mkdir()
+        try:
+            meta_out: dict[str, dict] = {}
+            for port, (declared, value) in outputs.items():
+                t = concrete_type_of(declared, value)
+                fname = port + (t.suffix or (Path(str(value)).suffix if isinstance(t, File) else ".dat"))
+                f = work / fname
+                t.save(value, f)
+                meta_out[port] = {
+                    "file": fname,
+                    "storage": type(t).__name__,
+                    "fingerprint": t.fingerprint(value),
+                    "sha256": hash_file(f),
+                    "bytes": f.stat().st_size,
+                }
+            if self.after_payload_hook is not None:
+                self.after_payload_hook(work)
+            meta = {"key": key, "created": time.time(), "outputs": meta_out, **info}
+            with open(work / "meta.json", "w") as fh:
+                json.dump(meta, fh, indent=1, sort_keys=True)
+                fh.flush()
+                os.fsync(fh.fileno())
+            final = self._entry_dir(key)
+            final.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                os.rename(work, final)
+            except OSError:
+                if not (final / "meta.json").exists():
+                    raise
+                shutil.rmtree(work, ignore_errors=True)  # another run stored the same key first
+        except BaseException:
+            shutil.rmtree(work, ignore_errors=True)
+            raise
+        entry = self.lookup(key)
+        assert entry is not None
+        values = {}
+        for port, (declared, value) in outputs.items():
+            t = concrete_type_of(declared, value)
+            values[port] = t.load(entry.path / entry.meta["outputs"][port]["file"]) if isinstance(t, File) else value
+        return entry, values
+
+    # --- maintenance --------------------------------------------------------------------------
+    def iter_entries(self):
+        if not self.entries.exists():
+            return
+        for sub in self.entries.iterdir():
+            if sub.is_dir():
+                yield from (d for d in sub.iterdir() if d.is_dir())
+
+    def info(self) -> dict:
+        n, size = 0, 0
+        for d in self.iter_entries():
+            n += 1
+            size += sum(f.stat().st_size for f in d.iterdir() if f.is_file())
+        tmp = len(list(self.tmp.iterdir())) if self.tmp.exists() else 0
+        return {"root": str(self.root), "entries": n, "bytes": size, "tmp_folders": tmp}
+
+    def clear(self) -> int:
+        n = sum(1 for _ in self.iter_entries())
+        for sub in (self.entries, self.tmp):
+            if sub.exists():
+                shutil.rmtree(sub, ignore_errors=True)
+        return n
+
+    def gc(self, older_than_days: float | None = None, max_bytes: int | None = None, tmp_age_s: float = 3600) -> dict:
+        """Remove stale tmp folders (older than ``tmp_age_s``), entries not used for ``older_than_days``,
+        and the least recently used entries beyond ``max_bytes``."""
+        now = time.time()
+        removed_tmp = 0
+        if self.tmp.exists():
+            for d in self.tmp.iterdir():
+                try:
+                    if now - d.stat().st_mtime > tmp_age_s or d.name.startswith("trash-"):
+                        shutil.rmtree(d, ignore_errors=True) if d.is_dir() else d.unlink()
+                        removed_tmp += 1
+                except FileNotFoundError:
+                    pass
+        entries = []
+        for d in self.iter_entries():
+            try:
+                used = (d / "meta.json").stat().st_mtime
+            except FileNotFoundError:
+                shutil.rmtree(d, ignore_errors=True)
+                continue
+            entries.append((used, sum(f.stat().st_size for f in d.iterdir() if f.is_file()), d))
+        entries.sort()
+        removed = 0
+        total = sum(s for _, s, _ in entries)
+        for used, size, d in entries:
+            old = older_than_days is not None and now - used > older_than_days * 86400
+            big = max_bytes is not None and total > max_bytes
+            if old or big:
+                self.remove(d.name)
+                total -= size
+                removed += 1
+        return {"removed_entries": removed, "removed_tmp": removed_tmp, "bytes_left": total}
+
+    def touch(self, entry: Entry) -> None:
+        """Mark an entry as used (for ``gc``'s least-recently-used order)."""
+        try:
+            os.utime(entry.path / "meta.json")
+        except OSError:
+            pass

@@ -1,0 +1,265 @@
+"""Checking a pipeline declaration and building its DAG, before anything runs.
+
+:func:`build_graph` resolves node types in the registry, validates params with each node's pydantic
+model, resolves wiring and port types, required inputs, outputs and cycles, and reports **every**
+problem at once (:class:`PipelineErrors`), each with file, line, node id, what is wrong, what to do
+and a did-you-mean suggestion where a name is misspelled.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import networkx as nx
+from pydantic import BaseModel, ValidationError
+
+from .errors import Location, PipelineError, PipelineErrors, RegistryError, did_you_mean
+from .node import NodeSpec, is_input_path_field
+from .registry import Registry, default_registry
+from .spec import NodeDecl, PipelineDecl, Value
+
+
+@dataclass
+class BoundNode:
+    """A node of a checked pipeline: its spec, validated params and resolved inputs."""
+
+    id: str
+    spec: NodeSpec
+    params: BaseModel
+    inputs: dict[str, tuple[str, str]]  # input port -> (source node id, source output port)
+    loc: Location
+
+
+@dataclass
+class Graph:
+    """A checked pipeline: nodes in topological order and the outputs to write."""
+
+    nodes: dict[str, BoundNode]
+    order: list[str]
+    outputs: dict[str, tuple[str, str]]  # file name -> (node id, port)
+    path: str = "<python>"
+    description: str = ""
+    files: list[str] = field(default_factory=list)
+
+    def needed_for(self, node_ids: list[str]) -> list[str]:
+        """The nodes (topologically ordered) that must be evaluated to produce ``node_ids``."""
+        need: set[str] = set()
+        stack = list(node_ids)
+        while stack:
+            n = stack.pop()
+            if n in need:
+                continue
+            need.add(n)
+            stack.extend(src for src, _ in self.nodes[n].inputs.values())
+        return [n for n in self.order if n in need]
+
+    def to_networkx(self) -> nx.DiGraph:
+        g = nx.DiGraph()
+        for n in self.order:
+            g.add_node(n, type=self.nodes[n].spec.type)
+        for n, b in self.nodes.items():
+            for port, (src, sport) in b.inputs.items():
+                g.add_edge(src, n, label=f"{sport}->{port}")
+        return g
+
+
+def _split_ref(ref: Any) -> tuple[str, str] | None:
+    if not isinstance(ref, str) or ref.count(".") < 1:
+        return None
+    node_id, port = ref.split(".", 1)
+    return (node_id, port) if node_id and port else None
+
+
+def _resolve_paths(spec: NodeSpec, raw: dict[str, Value]) -> dict[str, Any]:
+    """Param values; relative InputPath params resolved against the folder they were written in."""
+    out: dict[str, Any] = {}
+    for k, v in raw.items():
+        fld = spec.params.model_fields.get(k)
+        value = v.value
+        if fld is not None and value is not None and isinstance(value, str) and is_input_path_field(fld.annotation, fld.metadata):
+            p = Path(value).expanduser()
+            value = str(p if p.is_absolute() else (v.base_dir / p).resolve())
+        out[k] = value
+    return out
+
+
+def _check_params(decl: NodeDecl, spec: NodeSpec, errors: list[PipelineError]) -> BaseModel | None:
+    fields = spec.params.model_fields
+    bad = False
+    for k, v in decl.params.items():
+        if k not in fields:
+            errors.append(
+                PipelineError(
+                    f"unknown param '{k}' for type '{spec.type}'{did_you_mean(k, fields)}",
+                    location=v.loc,
+                    node=decl.id,
+                    hint=f"params of {spec.type}: {', '.join(fields) or '(none)'}",
+                )
+            )
+            bad = True
+    if bad:
+        return None
+    values = _resolve_paths(spec, decl.params)
+    try:
+        params = spec.params.model_validate(values)
+    except ValidationError as e:
+        for err in e.errors():
+            key = str(err["loc"][0]) if err["loc"] else ""
+            where = decl.params[key].loc if key in decl.params else decl.loc
+            path = ".".join(str(x) for x in err["loc"])
+            got = f" (got {err['input']!r})" if key in decl.params and not isinstance(err.get("input"), dict) else ""
+            errors.append(
+                PipelineError(
+                    f"invalid param '{path}' for type '{spec.type}': {err['msg']}{got}",
+                    location=where,
+                    node=decl.id,
+                    hint=f"`tbha-graph nodes {spec.type}` shows each param with its default and range",
+                )
+            )
+        return None
+    for k, fld in fields.items():
+        val = getattr(params, k)
+        if val is not None and is_input_path_field(fld.annotation, fld.metadata) and not Path(val).exists():
+            where = decl.params[k].loc if k in decl.params else decl.loc
+            errors.append(
+                PipelineError(
+                    f"param '{k}': file does not exist: {val}",
+                    location=where,
+                    node=decl.id,
+                    hint=f"fix the path, or pass another with --set {decl.id}.{k}=PATH",
+                )
+            )
+    return params
+
+
+def build_graph(decl: PipelineDecl, registry: Registry | None = None) -> Graph:
+    """Check ``decl`` completely and return its :class:`Graph`; raise :class:`PipelineErrors` listing
+    every problem found."""
+    reg = registry or default_registry()
+    errors: list[PipelineError] = []
+    specs: dict[str, NodeSpec] = {}
+    params: dict[str, BaseModel] = {}
+
+    for nid, nd in decl.nodes.items():
+        if isinstance(nd.type, NodeSpec):
+            specs[nid] = nd.type
+        else:
+            try:
+                specs[nid] = reg.get(str(nd.type))
+            except RegistryError as e:
+                errors.append(PipelineError(e.message, location=nd.type_loc, node=nid, hint=e.hint))
+                continue
+        p = _check_params(nd, specs[nid], errors)
+        if p is not None:
+            params[nid] = p
+
+    wiring: dict[str, dict[str, tuple[str, str]]] = {nid: {} for nid in decl.nodes}
+    for nid, nd in decl.nodes.items():
+        spec = specs.get(nid)
+        if spec is None:
+            continue
+        for port, v in nd.inputs.items():
+            if port not in spec.inputs:
+                errors.append(
+                    PipelineError(
+                        f"'{spec.type}' has no input port '{port}'{did_you_mean(port, spec.inputs)}",
+                        location=v.loc,
+                        node=nid,
+                        hint=f"input ports: {', '.join(spec.inputs) or '(none)'}",
+                    )
+                )
+                continue
+            ref = _split_ref(v.value)
+            if ref is None:
+                errors.append(PipelineError(f"input '{port}' must be '<node id>.<output port>', got {v.value!r}", location=v.loc, node=nid))
+                continue
+            src, sport = ref
+            if src not in decl.nodes:
+                errors.append(
+                    PipelineError(
+                        f"input '{port}' refers to unknown node '{src}'{did_you_mean(src, decl.nodes)}",
+                        location=v.loc,
+                        node=nid,
+                        hint=f"nodes in this pipeline: {', '.join(decl.nodes)}",
+                    )
+                )
+                continue
+            sspec = specs.get(src)
+            if sspec is None:
+                continue
+            if sport not in sspec.outputs:
+                errors.append(
+                    PipelineError(
+                        f"input '{port}': node '{src}' ({sspec.type}) has no output '{sport}'{did_you_mean(sport, sspec.outputs)}",
+                        location=v.loc,
+                        node=nid,
+                        hint=f"outputs of {sspec.type}: {', '.join(sspec.outputs)}",
+                    )
+                )
+                continue
+            want, got = spec.inputs[port].type, sspec.outputs[sport]
+            if not want.accepts(got):
+                errors.append(
+                    PipelineError(
+                        f"type mismatch: input '{port}' takes {want.describe()} but '{src}.{sport}' gives {got.describe()}",
+                        location=v.loc,
+                        node=nid,
+                        hint="connect an output of a compatible type, or add a node that converts it",
+                    )
+                )
+                continue
+            wiring[nid][port] = (src, sport)
+        for port, inp in spec.inputs.items():
+            if inp.required and port not in nd.inputs:
+                errors.append(
+                    PipelineError(
+                        f"required input '{port}' ({inp.type.describe()}) is not connected",
+                        location=nd.loc,
+                        node=nid,
+                        hint=f"add `inputs: {{{port}: <node id>.<output port>}}` to node '{nid}'",
+                    )
+                )
+
+    outputs: dict[str, tuple[str, str]] = {}
+    for name, v in decl.outputs.items():
+        ref = _split_ref(v.value)
+        if ref is None:
+            errors.append(PipelineError(f"output '{name}' must be '<node id>.<output port>', got {v.value!r}", location=v.loc))
+            continue
+        src, sport = ref
+        if src not in decl.nodes:
+            errors.append(PipelineError(f"output '{name}' names unknown node '{src}'{did_you_mean(src, decl.nodes)}", location=v.loc))
+            continue
+        if src in specs and sport not in specs[src].outputs:
+            errors.append(
+                PipelineError(
+                    f"output '{name}': node '{src}' ({specs[src].type}) has no output '{sport}'{did_you_mean(sport, specs[src].outputs)}",
+                    location=v.loc,
+                    hint=f"outputs of {specs[src].type}: {', '.join(specs[src].outputs)}",
+                )
+            )
+            continue
+        outputs[name] = (src, sport)
+
+    g = nx.DiGraph()
+    g.add_nodes_from(decl.nodes)
+    for nid, ins in wiring.items():
+        for src, _ in ins.values():
+            g.add_edge(src, nid)
+    order: list[str] = []
+    try:
+        order = list(nx.lexicographical_topological_sort(g)) if len(g) < 2000 else list(nx.topological_sort(g))
+    except nx.NetworkXUnfeasible:
+        cycle = nx.find_cycle(g)
+        path = " -> ".join([a for a, _ in cycle] + [cycle[0][0]])
+        first = decl.nodes[cycle[0][1]]
+        errors.append(PipelineError(f"the pipeline has a cycle: {path}", location=first.loc, node=cycle[0][1], hint="a node cannot depend on its own output; remove one of these connections"))
+
+    if errors:
+        raise PipelineErrors(errors)
+    nodes = {
+        nid: BoundNode(id=nid, spec=specs[nid], params=params[nid], inputs=wiring[nid], loc=decl.nodes[nid].loc)
+        for nid in decl.nodes
+    }
+    return Graph(nodes=nodes, order=order, outputs=outputs, path=decl.path, description=decl.description, files=decl.files)

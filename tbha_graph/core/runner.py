@@ -1,0 +1,71 @@
+"""One entry point for running a pipeline, used by the CLI, studies, batches and the Python API."""
+from __future__ import annotations
+
+import shutil
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from .cache import Cache
+from .graph import Graph, build_graph
+from .progress import QUIET, Reporter
+from .registry import Registry
+from .rundir import write_run_dir
+from .scheduler import RunResult, run_local, targets_of
+from .spec import PipelineDecl, apply_sets, apply_vars, read_pipeline
+from .errors import PipelineErrors
+
+
+def load_graph(
+    path: str | Path,
+    sets: dict[str, Any] | None = None,
+    vars: dict[str, Any] | None = None,
+    registry: Registry | None = None,
+    decl: PipelineDecl | None = None,
+) -> Graph:
+    """Read, override and check a pipeline file (or an already read ``decl``)."""
+    decl = decl if decl is not None else read_pipeline(path)
+    problems = apply_vars(decl, vars)
+    problems += apply_sets(decl, sets or {})
+    if problems:
+        raise PipelineErrors(problems)
+    return build_graph(decl, registry)
+
+
+def run_graph(
+    graph: Graph,
+    *,
+    out_dir: str | Path | None = None,
+    outputs: list[str] | None = None,
+    cache: Cache | None | bool = True,
+    executor: str = "local",
+    scheduler: str | None = None,
+    reporter: Reporter = QUIET,
+    workers: int | None = None,
+) -> RunResult:
+    """Run ``graph`` (the nodes the requested ``outputs`` need) and, with ``out_dir``, write them.
+
+    ``cache``: True (default location), False/None (no caching) or a :class:`Cache`.
+    ``executor``: "local" or "dask" (``scheduler`` = address of an existing cluster, else a LocalCluster).
+    """
+    c: Cache | None = Cache() if cache is True else (cache or None)
+    ids = targets_of(graph, outputs)
+    t0 = time.perf_counter()
+    work_root = Path(tempfile.mkdtemp(prefix="tbha-run-"))
+    try:
+        if executor == "local":
+            results = run_local(graph, ids, c, reporter, work_root, materialise=list(graph.outputs.values()) if out_dir is not None else [])
+        elif executor == "dask":
+            from .executors.dask_executor import run_dask
+
+            results = run_dask(graph, ids, c, reporter, scheduler=scheduler, workers=workers)
+        else:
+            raise ValueError(f"unknown executor {executor!r} (local or dask)")
+        run = RunResult(graph, results, time.perf_counter() - t0)
+        if out_dir is not None:
+            write_run_dir(run, Path(out_dir), executor)
+        return run
+    finally:
+        if c is not None:  # file outputs were moved into the cache; the work folders can go
+            shutil.rmtree(work_root, ignore_errors=True)

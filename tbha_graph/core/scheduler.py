@@ -1,0 +1,206 @@
+"""Running a checked :class:`Graph`: only what the requested outputs need, in topological order,
+each node looked up in the cache first.
+
+The per-node step (:func:`execute_node`) is shared by every executor: compute the key from the
+params and the inputs' content fingerprints, return the cached entry if there is one (a corrupt
+entry is reported, removed and recomputed), else load the inputs, run the function, check its outputs
+against the declared port types and store them atomically.
+"""
+from __future__ import annotations
+
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .cache import Cache, CorruptEntry, Entry
+from .errors import NodeError, NodeFailed, PortTypeError, TbhaError
+from .graph import BoundNode, Graph
+from .keys import node_key
+from .node import Context
+from .progress import QUIET, Reporter
+from .types import concrete_type_of
+
+
+@dataclass
+class NodeResult:
+    """What one node produced: fingerprints always (when caching), values in memory or in the cache."""
+
+    node_id: str
+    status: str  # "ran" or "cached"
+    key: str | None
+    seconds: float
+    fingerprints: dict[str, str | None]
+    values: dict[str, Any] | None = None
+    entry_path: str | None = None
+    entry_meta: dict | None = None
+    warnings: list[str] = field(default_factory=list)
+
+    def value(self, port: str, bound: BoundNode) -> Any:
+        if self.values is not None and port in self.values:
+            return self.values[port]
+        if self.entry_path is None:
+            raise TbhaError(f"output '{port}' of node '{self.node_id}' is not available")
+        entry = Entry(self.key or "", Path(self.entry_path), self.entry_meta or {})
+        try:
+            v = entry.load(port, bound.spec.outputs[port])
+        except CorruptEntry as e:
+            e.node = self.node_id
+            raise
+        if self.values is None:
+            self.values = {}
+        self.values[port] = v
+        return v
+
+    def light(self) -> "NodeResult":
+        """A copy without in-memory values (to send between processes when values live in the cache)."""
+        return NodeResult(self.node_id, self.status, self.key, self.seconds, self.fingerprints, None, self.entry_path, self.entry_meta, self.warnings)
+
+
+def _normalise_outputs(bound: BoundNode, out: Any) -> dict[str, Any]:
+    spec = bound.spec
+    if len(spec.outputs) == 1 and not (isinstance(out, dict) and set(out) == set(spec.outputs)):
+        out = {next(iter(spec.outputs)): out}
+    if not isinstance(out, dict):
+        raise PortTypeError(f"returned {type(out).__name__}, expected a dict with outputs {sorted(spec.outputs)}")
+    missing = set(spec.outputs) - set(out)
+    extra = set(out) - set(spec.outputs)
+    if missing or extra:
+        raise PortTypeError(
+            f"returned outputs {sorted(out)}, declared {sorted(spec.outputs)}"
+            + (f"; missing {sorted(missing)}" if missing else "")
+            + (f"; undeclared {sorted(extra)}" if extra else "")
+        )
+    return {k: spec.outputs[k].validate(v, f"output '{k}'") for k, v in out.items()}
+
+
+def execute_node(
+    bound: BoundNode,
+    graph: Graph,
+    inputs: dict[str, NodeResult],
+    cache: Cache | None,
+    reporter: Reporter = QUIET,
+    work_root: Path | None = None,
+) -> NodeResult:
+    """Evaluate one node given its upstream results (``inputs``: source node id -> result)."""
+    t0 = time.perf_counter()
+    spec = bound.spec
+    warnings: list[str] = []
+    key = None
+    if cache is not None:
+        fps = {port: inputs[src].fingerprints[sport] for port, (src, sport) in bound.inputs.items()}
+        for port in spec.inputs:
+            fps.setdefault(port, None)
+        key = node_key(spec, bound.params, fps)
+        try:
+            entry = cache.lookup(key)
+        except CorruptEntry as e:
+            warnings.append(f"{e.message}; recomputing node '{bound.id}'")
+            cache.remove(key)
+            entry = None
+        if entry is not None:
+            outs = entry.meta.get("outputs", {})
+            if set(outs) == set(spec.outputs):
+                return NodeResult(bound.id, "cached", key, time.perf_counter() - t0,
+                                  {p: outs[p]["fingerprint"] for p in outs}, None, str(entry.path), entry.meta, warnings)
+            warnings.append(f"cache entry {key[:12]} of node '{bound.id}' has the wrong outputs; recomputing")
+            cache.remove(key)
+
+    args = {port: inputs[src].value(sport, graph.nodes[src]) for port, (src, sport) in bound.inputs.items()}
+    for port in spec.inputs:
+        args.setdefault(port, None)
+    work_dir = None
+    if work_root is not None:
+        work_dir = work_root / f"{bound.id}-{time.monotonic_ns()}"
+    ctx = Context(bound.id, bound.params, work_dir=work_dir, reporter=reporter)
+    try:
+        out = _normalise_outputs(bound, spec.fn(ctx, **args))
+    except TbhaError as e:
+        raise NodeFailed(e.message, hint=e.hint, node=bound.id, location=e.location) from e
+    except Exception as e:  # noqa: BLE001 - a bug in a node: keep the traceback for its author
+        tb = "".join(traceback.format_exception(type(e), e, e.__traceback__)[-6:])
+        raise NodeFailed(f"{type(e).__name__}: {e}", node=bound.id, hint=f"this looks like a bug in node type '{spec.type}'; traceback:\n{tb}") from e
+    if cache is None:
+        return NodeResult(bound.id, "ran", None, time.perf_counter() - t0, {p: None for p in out}, out, None, None, warnings)
+    info = {"type": spec.type, "node_version": spec.version, "node_id": bound.id, "seconds": time.perf_counter() - t0}
+    entry, values = cache.store(key, {p: (spec.outputs[p], v) for p, v in out.items()}, info)
+    return NodeResult(bound.id, "ran", key, time.perf_counter() - t0,
+                      {p: entry.meta["outputs"][p]["fingerprint"] for p in out}, values, str(entry.path), entry.meta, warnings)
+
+
+@dataclass
+class RunResult:
+    """The results of the nodes that were evaluated, in order."""
+
+    graph: Graph
+    results: dict[str, NodeResult]
+    seconds: float
+
+    def output(self, name_or_ref: str) -> Any:
+        """Value of a named pipeline output (``"motion.bvh"``) or of ``"node.port"``."""
+        ref = self.graph.outputs.get(name_or_ref)
+        if ref is None:
+            node_id, port = name_or_ref.split(".", 1)
+            ref = (node_id, port)
+        return self.results[ref[0]].value(ref[1], self.graph.nodes[ref[0]])
+
+
+def targets_of(graph: Graph, outputs: list[str] | None) -> list[str]:
+    """Node ids needed for the given output names (all outputs when None; all sinks if none declared)."""
+    if outputs:
+        ids = []
+        for name in outputs:
+            if name in graph.outputs:
+                ids.append(graph.outputs[name][0])
+            elif name in graph.nodes:
+                ids.append(name)
+            else:
+                raise TbhaError(f"'{name}' is neither an output nor a node of the pipeline")
+        return ids
+    if graph.outputs:
+        return sorted({n for n, _ in graph.outputs.values()})
+    return list(graph.order)
+
+
+def run_local(
+    graph: Graph,
+    node_ids: list[str],
+    cache: Cache | None,
+    reporter: Reporter,
+    work_root: Path | None = None,
+    materialise: list[tuple[str, str]] = (),
+) -> dict[str, NodeResult]:
+    """The local executor: one node after another, in topological order.
+
+    ``materialise``: (node, port) values to load at the end (the outputs to write), so that a corrupt
+    cached value is found here, where the node can be recomputed, rather than when writing."""
+    results: dict[str, NodeResult] = {}
+    order = graph.needed_for(node_ids)
+    i = 0
+    retries = 0
+    while True:
+        try:
+            while i < len(order):
+                nid = order[i]
+                bound = graph.nodes[nid]
+                res = execute_node(bound, graph, results, cache, reporter, work_root)
+                for w in res.warnings:
+                    reporter.warn(w)
+                reporter.node_done(nid, bound.spec.type, res.status, res.seconds)
+                results[nid] = res
+                i += 1
+            for nid, port in materialise:
+                if nid in results:
+                    results[nid].value(port, graph.nodes[nid])
+            return results
+        except CorruptEntry as e:  # a cached value failed its checksum while loading: recompute it
+            bad = e.node or ""
+            if cache is None or bad not in results or retries > len(order):
+                raise
+            retries += 1
+            reporter.warn(f"{e.message}; recomputing node '{bad}'")
+            cache.remove(results[bad].key or "")
+            i = order.index(bad)
+            for later in order[i:]:
+                results.pop(later, None)

@@ -1,0 +1,163 @@
+"""Studies (ablations): one base pipeline, named variants, optional several inputs, one table.
+
+A study file::
+
+    description: compare segmenters
+    base: ../pipelines/default.yaml
+    metrics: metrics.json          # the pipeline output holding the figures (default: metrics.json)
+    inputs:                        # optional; each is a set of vars / --set overrides
+      sample: {vars: {video: ../data/sample/sample.mp4}}
+    variants:
+      seed: {}                     # the base as it is
+      threshold:
+        nodes: {segment: {type: segment.chroma_threshold}}   # merged like `extends`
+        set: {track.gate_px: 40}                           # like --set
+
+Every (variant, input) runs on the shared cache, so what variants have in common is computed once.
+A failing variant is recorded with its error and the others still run. Results: ``results.csv`` and
+``results.md`` (variant, input, status, wall time, every metric), plus a run directory per pair.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import time
+from pathlib import Path
+from typing import Any
+
+from .cache import Cache
+from .errors import Location, PipelineError, PipelineErrors, TbhaError
+from .progress import Reporter
+from .registry import Registry
+from .runner import load_graph, run_graph
+from .spec import merge_node_override, read_pipeline
+from .yamlfile import LocatedDict, load_yaml
+
+STUDY_KEYS = ("description", "base", "metrics", "inputs", "variants")
+
+
+def _flatten(d: Any, prefix: str = "") -> dict[str, Any]:
+    """``{"a": {"b": 1}}`` -> ``{"a.b": 1}`` (metrics may be nested)."""
+    if isinstance(d, dict):
+        out: dict[str, Any] = {}
+        for k, v in d.items():
+            out.update(_flatten(v, f"{prefix}{k}."))
+        return out
+    return {prefix[:-1]: d}
+
+
+def read_study(path: Path) -> dict[str, Any]:
+    data, problems = load_yaml(path)
+    if problems:
+        raise PipelineErrors(problems)
+    errors: list[PipelineError] = []
+    if not isinstance(data, LocatedDict):
+        raise PipelineErrors([PipelineError("a study file must be a mapping with 'base' and 'variants'", location=Location(str(path), 1))])
+    for k in data:
+        if k not in STUDY_KEYS:
+            from .errors import did_you_mean
+
+            errors.append(PipelineError(f"unknown key '{k}' in the study{did_you_mean(k, STUDY_KEYS)}", location=data.loc_of(k)))
+    if "base" not in data:
+        errors.append(PipelineError("the study has no 'base' pipeline", location=data.loc))
+    if not isinstance(data.get("variants"), dict) or not data.get("variants"):
+        errors.append(PipelineError("the study needs 'variants': a mapping of name -> overrides", location=data.loc))
+    if errors:
+        raise PipelineErrors(errors)
+    return data
+
+
+def run_study(
+    path: str | Path,
+    out_dir: str | Path,
+    *,
+    cache: Cache | None = None,
+    registry: Registry | None = None,
+    reporter: Reporter | None = None,
+    executor: str = "local",
+) -> list[dict[str, Any]]:
+    """Run every variant on every input; write results.csv / results.md under ``out_dir``."""
+    path = Path(path)
+    out_dir = Path(out_dir)
+    reporter = reporter or Reporter()
+    study = read_study(path)
+    base = Path(str(study["base"]))
+    base = base if base.is_absolute() else (path.parent / base)
+    metrics_name = str(study.get("metrics", "metrics.json"))
+    inputs = study.get("inputs") or {"default": {}}
+    rows: list[dict[str, Any]] = []
+    cache = cache if cache is not None else Cache()
+    for vname, variant in study["variants"].items():
+        variant = variant or {}
+        for iname, inp in inputs.items():
+            inp = inp or {}
+            row: dict[str, Any] = {"variant": vname, "input": iname}
+            reporter._print(f"study: variant '{vname}', input '{iname}'")
+            t0 = time.perf_counter()
+            try:
+                decl = read_pipeline(base)
+                errs: list[PipelineError] = []
+                vloc = study["variants"].loc_of(vname) if isinstance(study["variants"], LocatedDict) else Location(str(path))
+                for nid, body in (variant.get("nodes") or {}).items():
+                    merge_node_override(decl, str(nid), body, vloc, path.parent, errs)
+                if errs:
+                    raise PipelineErrors(errs)
+                sets = {**(inp.get("set") or {}), **(variant.get("set") or {})}
+                vars_ = {**(inp.get("vars") or {}), **(variant.get("vars") or {})}
+                graph = load_graph(base, sets=sets, vars=vars_, registry=registry, decl=decl)
+                run = run_graph(graph, out_dir=out_dir / vname / iname, cache=cache, reporter=reporter, executor=executor)
+                row["status"] = "ok"
+                row["ran"] = sum(r.status == "ran" for r in run.results.values())
+                row["cached"] = sum(r.status == "cached" for r in run.results.values())
+                if metrics_name in graph.outputs:
+                    row.update(_flatten(run.output(metrics_name)))
+            except TbhaError as e:
+                row["status"] = "failed"
+                row["error"] = e.format().splitlines()[0][:300]
+                reporter._print(f"  failed: {e.format()}")
+            row["wall_s"] = round(time.perf_counter() - t0, 3)
+            rows.append(row)
+    write_tables(rows, out_dir)
+    return rows
+
+
+def _columns(rows: list[dict[str, Any]]) -> list[str]:
+    first = ["variant", "input", "status", "wall_s", "ran", "cached"]
+    rest: list[str] = []
+    for r in rows:
+        for k in r:
+            if k not in first and k not in rest and k != "error":
+                rest.append(k)
+    return first + rest + (["error"] if any("error" in r for r in rows) else [])
+
+
+def _fmt(v: Any) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return str(v)
+
+
+def to_markdown(rows: list[dict[str, Any]]) -> str:
+    cols = _columns(rows)
+    out = io.StringIO()
+    out.write("| " + " | ".join(cols) + " |\n")
+    out.write("|" + "|".join("---" for _ in cols) + "|\n")
+    for r in rows:
+        out.write("| " + " | ".join(_fmt(r.get(c)).replace("|", "\\|") for c in cols) + " |\n")
+    return out.getvalue()
+
+
+def write_tables(rows: list[dict[str, Any]], out_dir: Path) -> None:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    cols = _columns(rows)
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=cols, extrasaction="ignore")
+    w.writeheader()
+    for r in rows:
+        w.writerow({c: _fmt(r.get(c)) for c in cols})
+    from .types import atomic_write_bytes
+
+    atomic_write_bytes(out_dir / "results.csv", buf.getvalue().encode())
+    atomic_write_bytes(out_dir / "results.md", to_markdown(rows).encode())

@@ -1,0 +1,81 @@
+"""Safe YAML loading that remembers where every key was written (file, line, column).
+
+Mappings load as :class:`LocatedDict`, a plain ``dict`` plus ``locs[key] -> Location`` and ``loc`` (the
+mapping itself). Duplicate keys are reported (PyYAML silently keeps the last). Only YAML's safe types
+are constructed: nothing in a pipeline file is ever evaluated as code.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from .errors import Location, PipelineError
+
+
+class LocatedDict(dict):
+    """A dict that knows the location of each key (``locs``) and of itself (``loc``)."""
+
+    loc: Location
+    locs: dict[Any, Location]
+
+    def loc_of(self, key: Any) -> Location:
+        return self.locs.get(key, self.loc)
+
+
+def _make_loader(filename: str, errors: list[PipelineError]) -> type[yaml.SafeLoader]:
+    class Loader(yaml.SafeLoader):
+        pass
+
+    def construct_mapping(loader: yaml.SafeLoader, node: yaml.MappingNode) -> LocatedDict:
+        loader.flatten_mapping(node)
+        out = LocatedDict()
+        out.loc = Location(filename, node.start_mark.line + 1, node.start_mark.column + 1)
+        out.locs = {}
+        for key_node, value_node in node.value:
+            key = loader.construct_object(key_node, deep=True)
+            loc = Location(filename, key_node.start_mark.line + 1, key_node.start_mark.column + 1)
+            if key in out:
+                errors.append(
+                    PipelineError(
+                        f"duplicate key '{key}' (first written at line {out.locs[key].line})",
+                        location=loc,
+                        hint="each node id and each key may appear once per mapping; rename or merge them",
+                    )
+                )
+                continue
+            out[key] = loader.construct_object(value_node, deep=True)
+            out.locs[key] = loc
+        return out
+
+    Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, construct_mapping)
+    return Loader
+
+
+def load_yaml(path: str | Path, text: str | None = None) -> tuple[Any, list[PipelineError]]:
+    """Load a YAML file; returns ``(data, problems)``. A syntax error is returned as one problem with
+    its line and column; ``data`` is then ``None``."""
+    path = Path(path)
+    errors: list[PipelineError] = []
+    if text is None:
+        try:
+            text = path.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            return None, [PipelineError(f"file not found: {path}", hint="check the path (relative paths start from the current folder)")]
+        except (OSError, UnicodeDecodeError) as e:
+            return None, [PipelineError(f"cannot read {path}: {e}")]
+    try:
+        data = yaml.load(text, Loader=_make_loader(str(path), errors))  # noqa: S506 - SafeLoader subclass
+    except yaml.MarkedYAMLError as e:
+        mark = e.problem_mark or e.context_mark
+        loc = Location(str(path), mark.line + 1, mark.column + 1) if mark else Location(str(path))
+        snippet = ""
+        if mark is not None:
+            lines = text.splitlines()
+            if 0 <= mark.line < len(lines):
+                snippet = f"\n    {lines[mark.line]}\n    {' ' * mark.column}^"
+        return None, [PipelineError(f"YAML syntax error: {e.problem or e}{snippet}", location=loc)]
+    except yaml.YAMLError as e:
+        return None, [PipelineError(f"YAML error: {e}", location=Location(str(path)))]
+    return data, errors
