@@ -49,7 +49,7 @@ class Entry:
     """A complete cache entry: its folder and parsed ``meta.json``."""
 
     key: str
-    path: Path
+    path: str | Path
     meta: dict
 
     def fingerprint(self, port: str) -> str:
@@ -58,7 +58,7 @@ class Entry:
     def load(self, port: str, declared: PortType) -> Any:
         """Load one output, verifying its checksum first."""
         info = self.meta["outputs"][port]
-        f = self.path / info["file"]
+        f = Path(self.path) / info["file"]
         try:
             digest = hash_file(f)
         except OSError as e:
@@ -91,6 +91,7 @@ class Cache:
     def __init__(self, root: Path | str | None = None):
         self.root = Path(root) if root is not None else default_cache_dir()
         self.entries = self.root / "entries"
+        self._entries_str = str(self.entries)
         self.tmp = self.root / "tmp"
 
     def _entry_dir(self, key: str) -> Path:
@@ -99,9 +100,9 @@ class Cache:
     # --- reading ------------------------------------------------------------------------------
     def lookup(self, key: str) -> Entry | None:
         """The complete entry for ``key``, or None. An unreadable meta.json counts as corrupt."""
-        d = self._entry_dir(key)
+        d = os.path.join(self._entries_str, key[:2], key)  # plain strings: this is the cache-hit hot path
         try:
-            with open(d / "meta.json", "rb") as f:
+            with open(os.path.join(d, "meta.json"), "rb") as f:
                 raw = f.read()
         except FileNotFoundError:
             return None
@@ -152,7 +153,7 @@ class Cache:
                 self.after_payload_hook(work)
             meta = {"key": key, "created": time.time(), "outputs": meta_out, **info}
             with open(work / "meta.json", "w") as fh:
-                json.dump(meta, fh, indent=1, sort_keys=True)
+                json.dump(meta, fh, sort_keys=True, separators=(",", ":"))
                 fh.flush()
                 os.fsync(fh.fileno())
             final = self._entry_dir(key)
@@ -171,7 +172,7 @@ class Cache:
         values = {}
         for port, (declared, value) in outputs.items():
             t = concrete_type_of(declared, value)
-            values[port] = t.load(entry.path / entry.meta["outputs"][port]["file"]) if isinstance(t, File) else value
+            values[port] = t.load(Path(entry.path) / entry.meta["outputs"][port]["file"]) if isinstance(t, File) else value
         return entry, values
 
     # --- maintenance --------------------------------------------------------------------------

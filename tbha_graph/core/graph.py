@@ -136,7 +136,7 @@ def _check_params(decl: NodeDecl, spec: NodeSpec, errors: list[PipelineError]) -
 def build_graph(decl: PipelineDecl, registry: Registry | None = None) -> Graph:
     """Check ``decl`` completely and return its :class:`Graph`; raise :class:`PipelineErrors` listing
     every problem found."""
-    reg = registry or default_registry()
+    reg = registry
     errors: list[PipelineError] = []
     specs: dict[str, NodeSpec] = {}
     params: dict[str, BaseModel] = {}
@@ -146,6 +146,7 @@ def build_graph(decl: PipelineDecl, registry: Registry | None = None) -> Graph:
             specs[nid] = nd.type
         else:
             try:
+                reg = reg or default_registry()  # loaded only when a type is named by string
                 specs[nid] = reg.get(str(nd.type))
             except RegistryError as e:
                 errors.append(PipelineError(e.message, location=nd.type_loc, node=nid, hint=e.hint))

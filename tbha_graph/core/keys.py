@@ -81,20 +81,31 @@ def code_fingerprint(spec: NodeSpec) -> str:
     return fp
 
 
+_file_fields: dict[type, tuple[str, ...]] = {}
+
+
+def _input_path_fields(model: type[BaseModel]) -> tuple[str, ...]:
+    names = _file_fields.get(model)
+    if names is None:
+        names = tuple(n for n, f in model.model_fields.items() if is_input_path_field(f.annotation, f.metadata))
+        _file_fields[model] = names
+    return names
+
+
 def canonical_params(params: BaseModel) -> dict[str, Any]:
     """Every param (defaults included) as JSON; input-file params as {path, sha256 of content}."""
     data = params.model_dump(mode="json")
-    for name, fld in type(params).model_fields.items():
-        if is_input_path_field(fld.annotation, fld.metadata):
-            value = getattr(params, name)
-            if value is not None:
-                p = Path(value)
-                if p.is_file():
-                    data[name] = {"path": str(p.resolve()), "sha256": file_content_hash(p)}
-                elif p.is_dir():
-                    data[name] = {"path": str(p.resolve()), "sha256": _dir_hash(p)}
-                else:
-                    raise CacheError(f"param '{name}': input file {p} does not exist, cannot compute the cache key")
+    for name in _input_path_fields(type(params)):
+        value = getattr(params, name)
+        if value is None:
+            continue
+        p = Path(value)
+        if p.is_file():
+            data[name] = {"path": str(p.resolve()), "sha256": file_content_hash(p)}
+        elif p.is_dir():
+            data[name] = {"path": str(p.resolve()), "sha256": _dir_hash(p)}
+        else:
+            raise CacheError(f"param '{name}': input file {p} does not exist, cannot compute the cache key")
     return data
 
 

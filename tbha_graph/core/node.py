@@ -103,6 +103,9 @@ class NodeSpec:
     def __call__(self, ctx: "Context", **inputs: Any) -> Any:
         return self.fn(ctx, **inputs)
 
+    def __deepcopy__(self, memo: dict) -> "NodeSpec":
+        return self  # a declaration is immutable; copying a pipeline never copies its node types
+
 
 def node(
     type: str,
