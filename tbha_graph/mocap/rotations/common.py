@@ -59,11 +59,6 @@ class SolverParams(BaseModel):
     chest_reference: TorsoReference = Field(
         "triangle", description="vector matched exactly by the chest rotation: 'spine' (to the neck) or 'triangle' (the shoulder line)"
     )
-
-    @property
-    def references(self) -> dict[int, TorsoReference]:
-        """Torso joint index -> its reference choice."""
-        return {JOINT_INDEX["hips"]: self.hips_reference, JOINT_INDEX["chest"]: self.chest_reference}
     swing_frame: Literal["parent", "world"] = Field(
         "parent", description="single-child joints: shortest arc in the parent's frame, or from the T-pose in world axes (seed 002 literal)"
     )
@@ -79,6 +74,11 @@ class SolverParams(BaseModel):
     )
     end_length: float = Field(0.1, gt=0, le=1, description="End Site length of head and wrists", json_schema_extra={"unit": "m"})
     foot_length: float = Field(0.15, gt=0, le=1, description="End Site length of the ankles (a foot pointing forward)", json_schema_extra={"unit": "m"})
+
+    @property
+    def references(self) -> dict[int, TorsoReference]:
+        """Torso joint index -> its reference choice."""
+        return {JOINT_INDEX["hips"]: self.hips_reference, JOINT_INDEX["chest"]: self.chest_reference}
 
 
 def rest_skeleton(joints: np.ndarray, p: SolverParams) -> tuple[np.ndarray, np.ndarray]:
