@@ -6,6 +6,7 @@
     tbha-graph schema                JSON Schema of pipeline files for editors
     tbha-graph run FILE ...          same as tbha-run
     tbha-graph study STUDY.yaml      run an ablation study, write results.csv / results.md
+    tbha-graph batch FILE TAKES      run one pipeline over many takes (locally or on Dask)
     tbha-graph cache info|clear|gc   the content-addressed cache
 """
 from __future__ import annotations
@@ -120,6 +121,24 @@ def cmd_study(args) -> int:
     return EXIT_OK if all(r["status"] == "ok" for r in rows) else EXIT_FAILED
 
 
+def cmd_batch(args) -> int:
+    from ..core.batch import collect_takes, run_batch
+    from ..core.study import to_markdown
+
+    _registry(args)
+    takes = collect_takes(args.inputs)
+    out = Path(args.out) if args.out else Path("runs") / "batch" / Path(args.pipeline).stem
+    cache = None if args.no_cache else (Cache(args.cache_dir) if args.cache_dir else Cache())
+    executor = "dask" if args.scheduler else args.executor
+    print(f"batch: {len(takes)} take(s) of {args.pipeline}, executor {executor}", file=sys.stderr)
+    rows = run_batch(args.pipeline, takes, out, var_name=args.var_name, cache=cache, executor=executor,
+                     scheduler=args.scheduler, workers=args.workers, reporter=Reporter(quiet=args.quiet),
+                     plugins=tuple(args.plugin or ()))
+    print(to_markdown(rows, ("take", "status", "frames", "wall_s")))
+    print(f"summary: {out / 'summary.csv'}, {out / 'summary.md'}")
+    return EXIT_OK if all(r["status"] == "ok" for r in rows) else EXIT_FAILED
+
+
 def cmd_cache(args) -> int:
     cache = Cache(args.cache_dir) if args.cache_dir else Cache()
     if args.action == "info":
@@ -181,6 +200,20 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--plugin", action="append")
     s.add_argument("--quiet", "-q", action="store_true")
     s.set_defaults(fn=cmd_study)
+
+    s = sub.add_parser("batch", help="run one pipeline over many takes (a glob, a folder or a YAML list)")
+    s.add_argument("pipeline")
+    s.add_argument("inputs", help="glob ('takes/*.mp4'), folder, or YAML file with 'takes:'")
+    s.add_argument("--var-name", default="video", help="pipeline variable bound to each take's path (default: video)")
+    s.add_argument("--out", "-o")
+    s.add_argument("--executor", choices=["local", "dask"], default="local")
+    s.add_argument("--scheduler", metavar="tcp://HOST:PORT")
+    s.add_argument("--workers", type=int)
+    s.add_argument("--cache-dir")
+    s.add_argument("--no-cache", action="store_true")
+    s.add_argument("--plugin", action="append")
+    s.add_argument("--quiet", "-q", action="store_true")
+    s.set_defaults(fn=cmd_batch)
 
     s = sub.add_parser("cache", help="inspect or clean the cache")
     s.add_argument("action", choices=["info", "clear", "gc"])

@@ -121,8 +121,11 @@ def run_study(
     return rows
 
 
-def _columns(rows: list[dict[str, Any]]) -> list[str]:
-    first = ["variant", "input", "status", "wall_s", "ran", "cached"]
+STUDY_FIRST = ("variant", "input", "status", "wall_s", "ran", "cached")
+
+
+def _columns(rows: list[dict[str, Any]], first: tuple[str, ...] = STUDY_FIRST) -> list[str]:
+    first = [c for c in first if any(c in r for r in rows)]
     rest: list[str] = []
     for r in rows:
         for k in r:
@@ -139,8 +142,8 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
-def to_markdown(rows: list[dict[str, Any]]) -> str:
-    cols = _columns(rows)
+def to_markdown(rows: list[dict[str, Any]], first: tuple[str, ...] = STUDY_FIRST) -> str:
+    cols = _columns(rows, first)
     out = io.StringIO()
     out.write("| " + " | ".join(cols) + " |\n")
     out.write("|" + "|".join("---" for _ in cols) + "|\n")
@@ -149,9 +152,10 @@ def to_markdown(rows: list[dict[str, Any]]) -> str:
     return out.getvalue()
 
 
-def write_tables(rows: list[dict[str, Any]], out_dir: Path) -> None:
+def write_tables(rows: list[dict[str, Any]], out_dir: Path, stem: str = "results", first: tuple[str, ...] = STUDY_FIRST) -> None:
+    """``<stem>.csv`` and ``<stem>.md`` (one row per dict; columns: ``first``, then every other key)."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    cols = _columns(rows)
+    cols = _columns(rows, first)
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=cols, extrasaction="ignore")
     w.writeheader()
@@ -159,5 +163,5 @@ def write_tables(rows: list[dict[str, Any]], out_dir: Path) -> None:
         w.writerow({c: _fmt(r.get(c)) for c in cols})
     from .types import atomic_write_bytes
 
-    atomic_write_bytes(out_dir / "results.csv", buf.getvalue().encode())
-    atomic_write_bytes(out_dir / "results.md", to_markdown(rows).encode())
+    atomic_write_bytes(out_dir / f"{stem}.csv", buf.getvalue().encode())
+    atomic_write_bytes(out_dir / f"{stem}.md", to_markdown(rows, first).encode())
