@@ -1,0 +1,145 @@
+"""The colour model: the suit's colours expressed in one colour space (what the ``color.*`` nodes output).
+
+A :class:`ColorModel` lists one :class:`ColourClass` per patch colour (with the joints wearing it) plus
+a last class ``"head"`` of kind ``"dark"`` for the head's dark hair (seed 000: the head's "black patch").
+Each patch colour has a reference point in the space's chroma plane (see
+:mod:`tbha_graph.mocap.color.spaces`) and a tolerance radius in the same units; a pixel belongs to the
+colour when its chroma lies within the radius and its luma is at least ``min_luma`` (darker pixels
+have unreliable chroma). The white suit is the chroma point ``suit_ref``; a pixel that is no patch
+colour is "dark" (head) when its luma is below ``dark_max_luma``.
+
+Tolerances are derived from the suit: ``tol = tolerance_scale * (distance to the nearest other colour
+or to the suit's white) / 2``, so colour regions never overlap while ``tolerance_scale <= 1``.
+"""
+from __future__ import annotations
+
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from ...core.errors import NodeError
+from ...core.node import InputPath
+from ...core.types import Model
+from ..suit import SuitSpec, load_suit
+from .spaces import rgb_to_chroma
+
+HEAD_CLASS = "head"
+
+
+class ColourClass(BaseModel):
+    """One class of pixels the segmenters look for."""
+
+    name: str = Field(description="colour name from the suit spec, or 'head' for the dark head")
+    kind: Literal["chroma", "dark"] = Field(description="'chroma': a patch colour; 'dark': the head's hair")
+    joints: list[str] = Field(description="joints wearing this colour (same-coloured patches)")
+    ref: tuple[float, float] = Field((0.0, 0.0), description="reference chroma (c1, c2), space units")
+    tol: float = Field(0.0, ge=0, description="tolerance radius around ref in the chroma plane, space units")
+
+
+class ColorModel(BaseModel):
+    """Suit colours in a colour space; see the module docstring."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    space: Literal["rg", "hsv", "lab"] = Field(description="colour space of every chroma value")
+    classes: list[ColourClass] = Field(description="patch colours, then the dark head class")
+    min_luma: float = Field(ge=0, le=255, description="pixels darker than this are never patch pixels (0..255)")
+    dark_max_luma: float = Field(ge=0, le=255, description="pixels darker than this are head (hair) pixels (0..255)")
+    suit_ref: tuple[float, float] = Field(description="chroma of the white suit, space units")
+    suit_tol: float = Field(ge=0, description="tolerance radius of the suit's white, space units")
+    patch_radius: float = Field(gt=0, description="patch radius on the suit, metres (from the suit spec)")
+
+    @property
+    def names(self) -> list[str]:
+        return [c.name for c in self.classes]
+
+    def chroma_classes(self) -> list[ColourClass]:
+        return [c for c in self.classes if c.kind == "chroma"]
+
+
+COLOR_MODEL = Model(ColorModel, doc="suit colours in a colour space")
+
+
+class ColorParams(BaseModel):
+    """Params shared by the ``color.*`` nodes."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    suit: InputPath | None = Field(
+        None, description="suit spec YAML; ignored when the 'suit' input is connected; None = the default suit"
+    )
+    tolerance_scale: float = Field(
+        0.9, gt=0, le=1.0,
+        description="tolerance radius as a fraction of half the chroma distance to the nearest other colour",
+    )
+    min_luma: float = Field(
+        30.0, ge=0, le=255, description="darker pixels are not classified as patch colours",
+        json_schema_extra={"unit": "grey level"},
+    )
+    dark_max_luma: float = Field(
+        45.0, ge=0, le=255, description="pixels darker than this are the head's hair",
+        json_schema_extra={"unit": "grey level"},
+    )
+
+
+def build_color_model(space: str, suit: SuitSpec, tolerance_scale: float = 0.9, min_luma: float = 30.0,
+                      dark_max_luma: float = 45.0) -> ColorModel:
+    """The colour model of ``suit`` in ``space`` (``"rg"``, ``"hsv"`` or ``"lab"``).
+
+    References are the suit's sRGB colours converted with the same function the segmenters use.
+    Raises :class:`NodeError` when two colours (or a colour and the suit) have the same chroma.
+    """
+    by_colour = suit.joints_by_colour()
+    names = list(by_colour)
+    refs = rgb_to_chroma(space, np.stack([suit.rgb(n) for n in names]))  # (n, 2)
+    suit_hex = suit.suit_color.lstrip("#")
+    suit_rgb = np.array([int(suit_hex[i : i + 2], 16) for i in (0, 2, 4)], dtype=np.float64) / 255.0
+    suit_ref = rgb_to_chroma(space, suit_rgb[None])[0]
+    pts = np.vstack([refs, suit_ref[None]])
+    d = np.linalg.norm(pts[:, None] - pts[None], axis=-1)
+    np.fill_diagonal(d, np.inf)
+    nearest = d.min(axis=1)
+    if not np.all(nearest > 1e-6):
+        i = int(np.argmin(nearest[:-1])) if nearest[:-1].min() <= 1e-6 else len(names)
+        j = int(np.argmin(d[i]))
+        label = lambda k: names[k] if k < len(names) else "the suit"  # noqa: E731
+        raise NodeError(
+            f"suit colours {label(i)} and {label(j)} have the same chroma in the {space} space: they cannot be told apart",
+            hint="give the suit clearly different colours (different hue/saturation, not just brightness)",
+        )
+    tols = tolerance_scale * nearest / 2.0
+    classes = [
+        ColourClass(name=n, kind="chroma", joints=by_colour[n], ref=(float(refs[k, 0]), float(refs[k, 1])), tol=float(tols[k]))
+        for k, n in enumerate(names)
+    ]
+    classes.append(ColourClass(name=HEAD_CLASS, kind="dark", joints=["head"]))
+    return ColorModel(
+        space=space, classes=classes, min_luma=float(min_luma), dark_max_luma=float(dark_max_luma),
+        suit_ref=(float(suit_ref[0]), float(suit_ref[1])), suit_tol=float(tols[-1]), patch_radius=float(suit.patch_radius),
+    )
+
+
+def color_model_node(ctx: Any, suit: SuitSpec | None, space: str) -> dict:
+    """Shared body of the ``color.*`` nodes: the connected suit, else the ``suit`` param, else the default."""
+    p: ColorParams = ctx.params
+    if suit is None:
+        suit = load_suit(p.suit)
+    elif not isinstance(suit, SuitSpec):
+        suit = SuitSpec.model_validate(suit)
+    return {"model": build_color_model(space, suit, p.tolerance_scale, p.min_luma, p.dark_max_luma)}
+
+
+def as_color_model(value: Any) -> ColorModel:
+    """Accept a :class:`ColorModel` or its JSON dict (what a ``Json`` input receives); NodeError if neither."""
+    if isinstance(value, ColorModel):
+        return value
+    try:
+        if isinstance(value, BaseModel):
+            value = value.model_dump(mode="json")
+        return ColorModel.model_validate(value)
+    except Exception as e:
+        raise NodeError(
+            f"the 'colors' input is not a colour model: {e}",
+            hint="connect it to the 'model' output of a color.* node (e.g. color.rg_chromaticity)",
+        ) from None

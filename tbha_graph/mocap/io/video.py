@@ -1,0 +1,161 @@
+"""``io.video``: open a video file as a :class:`~tbha_graph.mocap.ports.VideoClip`, and stream its frames.
+
+The node only checks the file and describes it (path, content hash, frame range, fps, size after
+downscaling); it never loads the video. Consumers stream frames with :func:`iter_frames`, which
+decodes with ``cv2.VideoCapture`` one frame at a time.
+
+Frames are BGR ``uint8`` arrays of shape ``(height, width, 3)`` (size after ``scale``), pixels from
+the top-left corner. Frame indices are those of the file (``start`` .. ``stop - 1``).
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Iterator
+
+import cv2
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from ...core.errors import NodeError
+from ...core.filehash import file_content_hash
+from ...core.node import InputPath, node
+from ..ports import VIDEO, VideoClip
+
+_OPEN_HINT = "check that the file is a video OpenCV can decode (e.g. .mp4 with mp4v/H.264, .avi with MJPG)"
+
+
+class VideoParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    path: InputPath = Field(description="video file to read (relative paths: from the pipeline file's folder)")
+    start: int = Field(0, ge=0, description="first frame to use (inclusive)", json_schema_extra={"unit": "frame"})
+    stop: int | None = Field(
+        None, ge=1, description="frame to stop before (exclusive); None or beyond the end = to the end",
+        json_schema_extra={"unit": "frame"},
+    )
+    scale: float = Field(1.0, gt=0, le=1, description="downscale factor applied to every frame (1 = full size)")
+    fps: float | None = Field(
+        None, gt=0, description="frame rate to use when the file does not state one (or to override it)",
+        json_schema_extra={"unit": "Hz"},
+    )
+
+    @model_validator(mode="after")
+    def _range(self) -> "VideoParams":
+        if self.stop is not None and self.stop <= self.start:
+            raise ValueError(f"stop ({self.stop}) must be greater than start ({self.start})")
+        return self
+
+
+def scaled_size(width: int, height: int, scale: float) -> tuple[int, int]:
+    """Frame size ``(width, height)`` in pixels after downscaling by ``scale`` (at least 1 px each)."""
+    return max(1, int(round(width * scale))), max(1, int(round(height * scale)))
+
+
+def _open(path: Path) -> cv2.VideoCapture:
+    cap = cv2.VideoCapture(str(path))
+    if not cap.isOpened():
+        cap.release()
+        raise NodeError(f"video {path}: OpenCV cannot open it (not a video, or an unsupported codec)", hint=_OPEN_HINT)
+    return cap
+
+
+def probe_video(path: str | Path, start: int = 0, stop: int | None = None, scale: float = 1.0,
+                fps: float | None = None) -> VideoClip:
+    """Check a video file and describe the frame range ``[start, stop)`` as a :class:`VideoClip`.
+
+    Reads the first frame of the range to prove the file decodes. Raises :class:`NodeError` naming the
+    file when it does not exist, is not a video, has no frames, or ``start`` lies beyond its end.
+    ``stop`` beyond the end is clamped to the end.
+    """
+    path = Path(path).expanduser().resolve()
+    if not path.exists():
+        raise NodeError(f"video {path} does not exist", hint="check the path (relative paths are resolved from the pipeline file's folder)")
+    if not path.is_file():
+        raise NodeError(f"video {path} is not a file", hint="give the path of a video file")
+    cap = _open(path)
+    try:
+        count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+        rate = float(cap.get(cv2.CAP_PROP_FPS))
+        ok, frame = cap.read()
+        if not ok or frame is None:
+            raise NodeError(f"video {path} has no frames (or its first frame cannot be decoded)", hint=_OPEN_HINT)
+        if count <= 0:  # container does not state its length: count by decoding (rare)
+            count = 1
+            while cap.grab():
+                count += 1
+        if start >= count:
+            raise NodeError(
+                f"video {path}: start frame {start} is beyond the end (the video has {count} frames, 0..{count - 1})",
+                hint=f"use a start below {count}",
+            )
+        if start > 0:
+            cap.set(cv2.CAP_PROP_POS_FRAMES, start)
+            ok, frame = cap.read()
+            if not ok or frame is None:
+                raise NodeError(f"video {path}: frame {start} (the start frame) cannot be decoded", hint=_OPEN_HINT)
+        height, width = frame.shape[:2]
+    finally:
+        cap.release()
+    if fps is None:
+        if not (math.isfinite(rate) and rate > 0):
+            raise NodeError(f"video {path} does not state its frame rate", hint="set the io.video param 'fps'")
+        fps = rate
+    stop = count if stop is None else min(int(stop), count)
+    w, h = scaled_size(width, height, scale)
+    return VideoClip(
+        path=str(path), sha256=file_content_hash(path), start=int(start), stop=int(stop), scale=float(scale),
+        fps=float(fps), width=w, height=h,
+    )
+
+
+def iter_frames(clip: VideoClip, start: int | None = None, stop: int | None = None) -> Iterator[tuple[int, np.ndarray]]:
+    """Yield ``(frame_index, frame)`` for the clip's frames (or the sub-range ``[start, stop)`` of file
+    frame indices inside it), one at a time; ``frame`` is BGR ``uint8`` ``(clip.height, clip.width, 3)``,
+    downscaled with ``cv2.INTER_AREA`` when ``clip.scale < 1``.
+
+    Raises :class:`NodeError` naming the file and the frame number where decoding fails.
+    """
+    if isinstance(clip, dict):
+        clip = VideoClip.model_validate(clip)
+    first = clip.start if start is None else max(int(start), clip.start)
+    last = clip.stop if stop is None else min(int(stop), clip.stop)
+    if first >= last:
+        return
+    path = Path(clip.path)
+    if not path.is_file():
+        raise NodeError(f"video {path} does not exist any more", hint="re-run io.video with the video's current path")
+    cap = _open(path)
+    try:
+        if first > 0:
+            cap.set(cv2.CAP_PROP_POS_FRAMES, first)
+        resize = clip.scale < 1.0
+        size = (clip.width, clip.height)
+        for index in range(first, last):
+            ok, frame = cap.read()
+            if not ok or frame is None:
+                raise NodeError(
+                    f"video {path}: decoding failed at frame {index} (frames {first}..{last - 1} were requested)",
+                    hint="the file may be truncated or corrupt; re-encode it or set io.video 'stop' to end before this frame",
+                )
+            if resize:
+                frame = cv2.resize(frame, size, interpolation=cv2.INTER_AREA)
+            elif frame.shape[1] != clip.width or frame.shape[0] != clip.height:
+                raise NodeError(
+                    f"video {path}: frame {index} is {frame.shape[1]}x{frame.shape[0]}, expected {clip.width}x{clip.height}",
+                    hint="the file changed since io.video read it; re-run io.video",
+                )
+            yield index, frame
+    finally:
+        cap.release()
+
+
+@node("io.video", version=1, outputs={"video": VIDEO}, params=VideoParams)
+def video(ctx) -> dict:
+    """Open a video file: check it decodes and describe its frames (streamed later by consumers).
+
+    Output ``video``: a VideoClip (absolute path, sha256 of the content, frame range [start, stop),
+    fps, frame size in pixels after downscaling by ``scale``).
+    """
+    p: VideoParams = ctx.params
+    return {"video": probe_video(p.path, start=p.start, stop=p.stop, scale=p.scale, fps=p.fps)}

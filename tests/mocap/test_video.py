@@ -1,0 +1,113 @@
+"""io.video: describing a video file, streaming its frames, and the errors users meet."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from tbha_graph.core.errors import NodeError
+from tbha_graph.core.testing import run_node
+from tbha_graph.core.types import hash_file
+from tbha_graph.mocap.io.video import iter_frames, video
+from tbha_graph.mocap.segment.testframes import write_video
+
+W, H, N = 128, 64, 24
+
+
+def _coded_frame(i: int) -> np.ndarray:
+    """A frame whose index is written as 8 black/white stripes (survives compression)."""
+    f = np.zeros((H, W, 3), np.uint8)
+    for b in range(8):
+        if (i >> b) & 1:
+            f[:, b * 16 : (b + 1) * 16] = 255
+    return f
+
+
+def _decode(f: np.ndarray) -> int:
+    w = f.shape[1]
+    return sum(1 << b for b in range(8) if f[f.shape[0] // 2, int((b + 0.5) * w / 8)].mean() > 128)
+
+
+@pytest.fixture(scope="module")
+def coded_mp4(tmp_path_factory):
+    path = tmp_path_factory.mktemp("video") / "coded.mp4"
+    write_video(path, [_coded_frame(i) for i in range(N)], fps=25.0)
+    return path
+
+
+def test_describes_a_real_mp4(coded_mp4):
+    clip = run_node(video, {"path": str(coded_mp4)})["video"]
+    assert (clip.start, clip.stop, clip.n_frames) == (0, N, N)
+    assert (clip.width, clip.height) == (W, H)
+    assert clip.fps == pytest.approx(25.0)
+    assert clip.sha256 == hash_file(coded_mp4)
+    frames = list(iter_frames(clip))
+    assert [i for i, _ in frames] == list(range(N))
+    assert [_decode(f) for _, f in frames] == list(range(N))
+    assert all(f.shape == (H, W, 3) and f.dtype == np.uint8 for _, f in frames)
+
+
+def test_range_and_downscale(coded_mp4):
+    clip = run_node(video, {"path": str(coded_mp4), "start": 5, "stop": 12, "scale": 0.5})["video"]
+    assert (clip.start, clip.stop, clip.width, clip.height) == (5, 12, W // 2, H // 2)
+    frames = list(iter_frames(clip))
+    assert [i for i, _ in frames] == list(range(5, 12))
+    assert [_decode(f) for _, f in frames] == list(range(5, 12))  # seeking lands on the right frame
+    assert frames[0][1].shape == (H // 2, W // 2, 3)
+    # a stop beyond the end is clamped to the end
+    assert run_node(video, {"path": str(coded_mp4), "stop": 1000})["video"].stop == N
+
+
+def test_missing_path_names_the_file(tmp_path):
+    path = tmp_path / "nope.mp4"
+    with pytest.raises(NodeError, match="nope.mp4.*does not exist"):
+        run_node(video, {"path": str(path)})
+
+
+def test_text_file_named_mp4_names_the_file(tmp_path):
+    path = tmp_path / "notes.mp4"
+    path.write_text("this is not a video\n")
+    with pytest.raises(NodeError, match="notes.mp4"):
+        run_node(video, {"path": str(path)})
+
+
+def test_zero_frame_video_names_the_file(tmp_path):
+    path = tmp_path / "empty.mp4"
+    wr = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), 30.0, (W, H))
+    wr.release()  # no frames written
+    if not path.exists():
+        path.write_bytes(b"")
+    with pytest.raises(NodeError, match="empty.mp4"):
+        run_node(video, {"path": str(path)})
+
+
+def test_start_beyond_end(coded_mp4):
+    with pytest.raises(NodeError, match=rf"start frame 30 is beyond the end.*{N} frames"):
+        run_node(video, {"path": str(coded_mp4), "start": 30})
+
+
+def test_bad_params_refused(coded_mp4):
+    with pytest.raises(Exception, match="stop"):
+        run_node(video, {"path": str(coded_mp4), "start": 5, "stop": 5})
+    with pytest.raises(Exception):
+        run_node(video, {"path": str(coded_mp4), "scale": 1.5})
+
+
+def test_decoding_failure_names_the_frame(tmp_path):
+    # an AVI cut in half: its header still announces every frame, decoding stops in the middle
+    full = tmp_path / "full.avi"
+    wr = cv2.VideoWriter(str(full), cv2.VideoWriter_fourcc(*"MJPG"), 30.0, (W, H))
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        wr.write(rng.integers(0, 256, (H, W, 3), dtype=np.uint8))
+    wr.release()
+    cut = tmp_path / "cut.avi"
+    data = full.read_bytes()
+    cut.write_bytes(data[: len(data) // 2])
+    clip = run_node(video, {"path": str(cut)})["video"]
+    assert clip.n_frames == 20
+    seen = []
+    with pytest.raises(NodeError, match=r"cut.avi: decoding failed at frame (\d+)") as e:
+        for i, _ in iter_frames(clip):
+            seen.append(i)
+    assert f"frame {len(seen)}" in str(e.value) and 0 < len(seen) < 20
