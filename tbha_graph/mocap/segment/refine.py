@@ -1,0 +1,286 @@
+"""Hierarchical patch localisation inside search windows (seed 000, section 2).
+
+For each window (a square of side ``size`` px cut from the full-resolution frame around a predicted
+patch position), two cues are combined:
+
+1. **Adaptive clustering** of the pixels by chroma: starting from the colour's mean and covariance, the
+   pixels within ``cluster_sigma`` Mahalanobis units are collected and the mean and covariance re-estimated
+   from them, ``cluster_iterations`` times. This sees the inside of the patch but leaves holes / notches
+   at specular highlights. The connected component nearest the prediction is region A. (For the head's
+   dark class the cluster is simply the pixels darker than ``dark_max_luma``.)
+2. **Roberts cross edges** of the grey image (R + G + B) / 3, kept within ``edge_band`` px of region A:
+   the patch's boundary including the blurred band between patch and suit, which clustering misses.
+   Region B. (Grey, not the space's own luma: HSV's V hardly separates a saturated patch from white.)
+
+The union A ∪ B is taken, its outer boundary traced (``cv2.findContours``), and the histograms of the
+boundary points' x and y coordinates computed; the two farthest-apart histogram peaks in each give the
+patch's bounding rectangle, whose centre is the joint's 2D position.
+
+The colour statistics of all windows are computed at once on a ``(m, size, size)`` stack; only the
+region selection and contour tracing loop over windows. Coordinates are pixels from the frame's top-left.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..color.model import ColorModel
+from ..color.spaces import convert
+
+
+@dataclass(frozen=True)
+class RefineSettings:
+    """Tuning of :func:`refine_windows` (documented on the ``segment.hierarchical`` params)."""
+
+    cluster_sigma: float = 3.0
+    cluster_iterations: int = 2
+    edge_fraction: float = 0.3
+    edge_band: int = 2
+    peak_fraction: float = 0.3
+    min_area: float = 8.0
+
+
+@dataclass
+class WindowResults:
+    """Per window: ``ok`` (m,) bool (a region was found), ``centres`` (m, 2) px, ``areas`` (m,) px²,
+    ``boxes`` (m, 4) x0, y0, x1, y1 px, ``diameters`` (m,) px, ``means`` (m, 2) adapted chroma mean,
+    ``touches`` (m,) bool (the region reached the window border: the window may have cut it)."""
+
+    ok: np.ndarray
+    centres: np.ndarray
+    areas: np.ndarray
+    boxes: np.ndarray
+    diameters: np.ndarray
+    means: np.ndarray
+    touches: np.ndarray
+
+
+def window_origins(centres: np.ndarray, size: int, width: int, height: int) -> np.ndarray:
+    """Top-left corners (m, 2) int of ``size``-px windows centred on ``centres`` (m, 2), kept inside the frame."""
+    c = np.nan_to_num(np.asarray(centres, dtype=np.float64).reshape(-1, 2))
+    o = np.rint(c - (size - 1) / 2.0).astype(np.int64)
+    o[:, 0] = np.clip(o[:, 0], 0, max(width - size, 0))
+    o[:, 1] = np.clip(o[:, 1], 0, max(height - size, 0))
+    return o
+
+
+def cut_windows(frame: np.ndarray, origins: np.ndarray, size: int) -> np.ndarray:
+    """Stack of windows ``(m, size, size, 3)`` cut from ``frame`` at ``origins`` (m, 2) (x, y)."""
+    return np.stack([frame[y : y + size, x : x + size] for x, y in origins]) if len(origins) else np.zeros((0, size, size, 3), np.uint8)
+
+
+def farthest_peaks(hist: np.ndarray, fraction: float) -> tuple[np.ndarray, np.ndarray]:
+    """The two farthest-apart peaks of each row of ``hist`` (m, n) (histograms with 1 px bins).
+
+    A peak is a local maximum holding at least ``fraction`` of its row's highest bin; each is refined to
+    sub-pixel by the count-weighted mean of its bin and its two neighbours. Returns the low and high
+    peak positions (m,) in bin units; NaN for empty rows.
+    """
+    h = np.pad(np.asarray(hist, dtype=np.float64), ((0, 0), (1, 1)))
+    mid = h[:, 1:-1]
+    top = mid.max(axis=1, keepdims=True)
+    peak = (mid >= h[:, :-2]) & (mid >= h[:, 2:]) & (mid >= fraction * top) & (mid > 0)
+    rows = np.arange(len(h))
+    first = np.argmax(peak, axis=1) + 1  # index into the padded rows
+    last = h.shape[1] - 2 - np.argmax(peak[:, ::-1], axis=1)
+
+    def sub(i: np.ndarray) -> np.ndarray:
+        lo, c, hi = h[rows, i - 1], h[rows, i], h[rows, i + 1]
+        return (i - 1) + (hi - lo) / np.maximum(lo + c + hi, 1e-12)
+
+    empty = top[:, 0] <= 0
+    a, b = sub(first), sub(last)
+    a[empty] = np.nan
+    b[empty] = np.nan
+    return a, b
+
+
+def _chroma_clusters(c1, c2, luma, means, refs, tols, model: ColorModel, s: RefineSettings):
+    """Adaptive clustering on a stack (m, S, S): member mask (m, S, S) bool and the adapted means (m, 2).
+
+    Only pixels within 1.5 tolerances of the colour's reference can ever join the cluster (the mean
+    stays within half a tolerance of it and the gate ellipse within one tolerance of the mean), so the
+    iterations run on those pixels alone, with per-window sums by ``np.bincount``.
+    """
+    m = len(means)
+    g2 = s.cluster_sigma**2
+    # variance of one axis of a 2D Gaussian truncated at cluster_sigma, relative to the untruncated one
+    e = np.exp(-g2 / 2.0)
+    kappa = 1.0 - (g2 / 2.0) * e / (1.0 - e)
+    var_hi = (tols / s.cluster_sigma) ** 2  # (m,): the gate ellipse never exceeds the tolerance circle
+    var_lo = var_hi * 0.02
+    r1 = c1 - refs[:, 0].astype(np.float32)[:, None, None]
+    r2 = c2 - refs[:, 1].astype(np.float32)[:, None, None]
+    reach = ((1.5 * tols) ** 2).astype(np.float32)[:, None, None]
+    cand = (r1 * r1 + r2 * r2 < reach) & (luma >= np.float32(model.min_luma))
+    idx = np.flatnonzero(cand)
+    member = np.zeros(cand.size, bool)
+    mu = means.astype(np.float64).copy()
+    if idx.size == 0:
+        return member.reshape(cand.shape), mu
+    win = idx // (cand.shape[1] * cand.shape[2])
+    x1 = c1.reshape(-1)[idx].astype(np.float64)
+    x2 = c2.reshape(-1)[idx].astype(np.float64)
+    cov = np.zeros((m, 2, 2))
+    cov[:, 0, 0] = cov[:, 1, 1] = var_hi
+    inl = np.zeros(idx.size, bool)
+    for _ in range(max(1, s.cluster_iterations)):
+        det = cov[:, 0, 0] * cov[:, 1, 1] - cov[:, 0, 1] ** 2
+        d1 = x1 - mu[win, 0]
+        d2 = x2 - mu[win, 1]
+        m2 = (cov[win, 1, 1] * d1 * d1 - 2.0 * cov[win, 0, 1] * d1 * d2 + cov[win, 0, 0] * d2 * d2) / det[win]
+        inl = m2 < g2
+        w = inl.astype(np.float64)
+        n = np.bincount(win, weights=w, minlength=m)
+        ok = n >= s.min_area
+        if not ok.any():
+            break
+        n1 = np.maximum(n, 1.0)
+        wd1, wd2 = w * d1, w * d2
+        s1 = np.bincount(win, weights=wd1, minlength=m) / n1
+        s2 = np.bincount(win, weights=wd2, minlength=m) / n1
+        s11 = np.bincount(win, weights=wd1 * d1, minlength=m) / n1 - s1 * s1
+        s12 = np.bincount(win, weights=wd1 * d2, minlength=m) / n1 - s1 * s2
+        s22 = np.bincount(win, weights=wd2 * d2, minlength=m) / n1 - s2 * s2
+        new_mu = mu + np.stack([s1, s2], axis=1)
+        # keep the mean within half the tolerance of the colour's reference
+        off = new_mu - refs
+        dist = np.linalg.norm(off, axis=1)
+        lim = 0.5 * tols
+        new_mu = np.where((dist > lim)[:, None], refs + off * (lim / np.maximum(dist, 1e-12))[:, None], new_mu)
+        new_cov = np.stack([np.stack([s11, s12], -1), np.stack([s12, s22], -1)], -2) / kappa
+        evals, evecs = np.linalg.eigh(new_cov)
+        evals = np.clip(evals, var_lo[:, None], var_hi[:, None])
+        new_cov = np.einsum("mij,mj,mkj->mik", evecs, evals, evecs)
+        mu = np.where(ok[:, None], new_mu, mu)
+        cov = np.where(ok[:, None, None], new_cov, cov)
+    # final membership with the adapted statistics
+    det = cov[:, 0, 0] * cov[:, 1, 1] - cov[:, 0, 1] ** 2
+    d1 = x1 - mu[win, 0]
+    d2 = x2 - mu[win, 1]
+    m2 = (cov[win, 1, 1] * d1 * d1 - 2.0 * cov[win, 0, 1] * d1 * d2 + cov[win, 0, 0] * d2 * d2) / det[win]
+    member[idx[m2 < g2]] = True
+    return member.reshape(cand.shape), mu
+
+
+def _grey(stack: np.ndarray) -> np.ndarray:
+    """Grey level (B + G + R) / 3 of a BGR uint8 stack (m, S, S, 3), float32 (m, S, S)."""
+    return stack.sum(axis=-1, dtype=np.float32) * np.float32(1.0 / 3.0)
+
+
+def _roberts(luma: np.ndarray) -> np.ndarray:
+    """Roberts cross gradient magnitude ``|I(x,y) - I(x+1,y+1)| + |I(x+1,y) - I(x,y+1)|`` of a stack
+    (m, S, S). The operator answers for the centre of each 2x2 cell; each pixel gets the strongest of
+    the (up to) four cells it belongs to, so edges are not shifted by half a pixel to the top-left."""
+    m, h, w = luma.shape
+    cell = np.zeros((m, h + 1, w + 1), luma.dtype)
+    cell[:, 1:-1, 1:-1] = np.abs(luma[:, :-1, :-1] - luma[:, 1:, 1:]) + np.abs(luma[:, :-1, 1:] - luma[:, 1:, :-1])
+    return np.maximum(np.maximum(cell[:, :-1, :-1], cell[:, :-1, 1:]), np.maximum(cell[:, 1:, :-1], cell[:, 1:, 1:]))
+
+
+def refine_windows(
+    frame: np.ndarray,
+    origins: np.ndarray,
+    size: int,
+    predicted: np.ndarray,
+    classes: list[int],
+    means: np.ndarray,
+    model: ColorModel,
+    settings: RefineSettings,
+) -> WindowResults:
+    """Locate one patch per window (see module docstring).
+
+    ``frame`` BGR uint8 (h, w, 3); ``origins`` (m, 2) window top-left corners; ``predicted`` (m, 2) px
+    expected patch centres (the region nearest to it is chosen); ``classes`` (m,) class index into
+    ``model.classes``; ``means`` (m, 2) the chroma mean to start clustering from (ignored for the dark class).
+
+    The windows are processed as one tall image (windows stacked vertically, separated by empty rows
+    wider than the edge band) so each OpenCV operation runs once per call, not once per window.
+    """
+    m = len(origins)
+    out = WindowResults(
+        ok=np.zeros(m, bool), centres=np.full((m, 2), np.nan), areas=np.zeros(m), boxes=np.full((m, 4), np.nan),
+        diameters=np.zeros(m), means=np.array(means, dtype=np.float64).reshape(m, 2), touches=np.zeros(m, bool),
+    )
+    if m == 0:
+        return out
+    S = int(size)
+    stack = cut_windows(frame, origins, S)
+    c1, c2, luma = convert(model.space, stack)
+    kinds = np.array([model.classes[c].kind == "chroma" for c in classes])
+    H = S + settings.edge_band + 1  # rows per window in the tall image
+    member = np.zeros((m, H, S), np.uint8)
+    if kinds.any():
+        ci = np.flatnonzero(kinds)
+        refs = np.array([model.classes[classes[i]].ref for i in ci], dtype=np.float64)
+        tols = np.array([model.classes[classes[i]].tol for i in ci], dtype=np.float64)
+        mem, mu = _chroma_clusters(c1[ci], c2[ci], luma[ci], out.means[ci], refs, tols, model, settings)
+        member[ci, :S] = mem
+        out.means[ci] = mu
+    if (~kinds).any():
+        di = np.flatnonzero(~kinds)
+        member[di, :S] = luma[di] < np.float32(model.dark_max_luma)
+
+    # region A: per window, the clustered region nearest the prediction (among the larger ones), traced
+    # by its outer contour and filled (so highlight holes inside the patch do not matter)
+    contours, _ = cv2.findContours(member.reshape(m * H, S), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    local_pred = np.asarray(predicted, dtype=np.float64).reshape(m, 2) - origins
+    found: dict[int, list[tuple[float, float, np.ndarray]]] = {}
+    for c in contours:
+        x, y, w, h = cv2.boundingRect(c)
+        if w * h < settings.min_area:
+            continue
+        area = cv2.contourArea(c) + 0.5 * cv2.arcLength(c, True) + 1.0  # pixels, by Pick's theorem
+        if area < settings.min_area:
+            continue
+        wi = y // H
+        found.setdefault(wi, []).append((area, x + w / 2.0 - local_pred[wi, 0], y - wi * H + h / 2.0 - local_pred[wi, 1], c))
+    chosen: list[np.ndarray] = []
+    for wi, cands in found.items():
+        big = 0.25 * max(a for a, *_ in cands)
+        area, _, _, c = min((t for t in cands if t[0] >= big), key=lambda t: t[1] * t[1] + t[2] * t[2])
+        chosen.append(c)
+        x, y, w, h = cv2.boundingRect(c)
+        y -= wi * H
+        out.touches[wi] = x == 0 or y == 0 or x + w >= S or y + h >= S
+    if not chosen:
+        return out
+    region = np.zeros((m * H, S), np.uint8)
+    cv2.drawContours(region, chosen, -1, 255, thickness=-1)
+    chosen_windows = set(found)
+
+    # region B: Roberts edges within edge_band px of A, thresholded relative to the strongest there
+    k = 2 * settings.edge_band + 1
+    band = cv2.dilate(region, np.ones((k, k), np.uint8)).reshape(m, H, S) > 0
+    mag = np.zeros((m, H, S), np.float32)
+    mag[:, :S] = _roberts(luma if model.space == "rg" else _grey(stack))
+    peak = np.where(band, mag, 0).reshape(m, -1).max(axis=1)
+    thr = np.where(peak > 0, settings.edge_fraction * peak, np.inf).astype(np.float32)
+    union = (region.reshape(m, H, S) > 0) | ((mag > thr[:, None, None]) & band)
+
+    # boundary of A ∪ B, histograms of its x and y, farthest-apart peaks -> rectangle -> centre
+    u8 = union.view(np.uint8).reshape(m * H, S)
+    contours, _ = cv2.findContours(u8, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    best: dict[int, np.ndarray] = {}
+    for c in contours:
+        w = int(c[0, 0, 1]) // H
+        if w in chosen_windows and (w not in best or len(c) > len(best[w])):
+            best[w] = c
+    if not best:
+        return out
+    wins = np.fromiter(best, dtype=np.int64, count=len(best))
+    pts = np.concatenate([best[w].reshape(-1, 2) for w in wins])
+    wid = np.repeat(wins, [len(best[w]) for w in wins])
+    hx = np.bincount(wid * S + pts[:, 0], minlength=m * S).reshape(m, S)[wins]
+    hy = np.bincount(wid * S + (pts[:, 1] - wid * H), minlength=m * S).reshape(m, S)[wins]
+    x0, x1 = farthest_peaks(hx, settings.peak_fraction)
+    y0, y1 = farthest_peaks(hy, settings.peak_fraction)
+    ox, oy = origins[wins, 0], origins[wins, 1]
+    out.ok[wins] = True
+    out.centres[wins] = np.stack([(x0 + x1) / 2.0 + ox, (y0 + y1) / 2.0 + oy], axis=1)
+    out.boxes[wins] = np.stack([x0 + ox, y0 + oy, x1 + ox, y1 + oy], axis=1)
+    out.areas[wins] = union.reshape(m, -1).sum(axis=1)[wins]
+    out.diameters[wins] = np.maximum(x1 - x0, y1 - y0) + 1.0
+    return out

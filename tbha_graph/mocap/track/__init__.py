@@ -1,0 +1,1 @@
+"""2D trackers: turn per-frame patch detections into identified joint tracks."""

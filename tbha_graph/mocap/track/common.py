@@ -1,0 +1,128 @@
+"""What the 2D trackers share: reading their inputs, the start frame, the passes, the output bundle.
+
+A tracker identifies the 16 joints in the segmenter's per-colour candidates. It starts at the first
+frame where the posture rules (:mod:`.posture`) identify every joint, tracks forwards from there to the
+end and backwards from there to the first frame, one frame at a time (:class:`FrameTracker`), and
+returns a TRACKS2D bundle: ``points`` (n, 16, 2) px, ``tracked`` (n, 16) bool (False: the patch was
+not seen; ``points`` then holds the tracker's estimate), ``fps``, ``width``, ``height``, ``frame_index``.
+"""
+from __future__ import annotations
+
+from typing import Callable, Protocol
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from ...core.errors import NodeError
+from ..color.model import ColorModel
+from ..skeleton import JOINT_INDEX, JOINT_NAMES, N_JOINTS
+from .posture import PostureResult, find_start
+
+
+class StartParams(BaseModel):
+    """Params shared by the trackers: how the start frame is found."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    init_frames: int = Field(
+        90, ge=1, description="look for the start T-pose in this many first frames", json_schema_extra={"unit": "frame"}
+    )
+    min_separation: float = Field(
+        4.0, ge=0, description="same-coloured patches must be at least this far apart vertically in the start frame",
+        json_schema_extra={"unit": "px"},
+    )
+
+
+class FrameTracker(Protocol):
+    """One tracking direction: ``step`` takes a frame's candidates per class (list over classes of
+    (k, 2) px arrays) and returns ``points`` (16, 2) px and ``tracked`` (16,) bool."""
+
+    def step(self, candidates: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+def class_joints(model: ColorModel, names: np.ndarray) -> list[list[int]]:
+    """Joint indices wearing each detection class; checks the detections match the colour model."""
+    got = [str(n) for n in np.asarray(names).reshape(-1)]
+    if got != model.names:
+        raise NodeError(
+            f"the detections' colours {got} differ from the colour model's {model.names}",
+            hint="connect the tracker's 'colors' to the same color.* node the segmenter used",
+        )
+    out = []
+    for c in model.classes:
+        unknown = [j for j in c.joints if j not in JOINT_INDEX]
+        if unknown:
+            raise NodeError(f"colour model: class {c.name!r} names unknown joint(s) {unknown}")
+        out.append([JOINT_INDEX[j] for j in c.joints])
+    covered = sorted(j for js in out for j in js)
+    if covered != list(range(N_JOINTS)):
+        lacking = [JOINT_NAMES[j] for j in range(N_JOINTS) if j not in covered]
+        raise NodeError(f"colour model: no colour class for joint(s) {lacking}", hint="check the suit spec")
+    return out
+
+
+def check_detections(det: dict) -> tuple[np.ndarray, np.ndarray]:
+    """``centres`` (n, C, K, 2) and ``areas`` (n, C, K) of a detections bundle, as float64."""
+    for key in ("centres", "areas", "colour_names", "fps", "width", "height"):
+        if key not in det:
+            raise NodeError(f"the detections bundle has no {key!r} array", hint="connect the output of a segment.* node")
+    centres = np.asarray(det["centres"], dtype=np.float64)
+    if centres.ndim != 4 or centres.shape[-1] != 2 or len(centres) == 0:
+        raise NodeError(f"detections 'centres' must have shape (n_frames >= 1, n_colours, max_k, 2), got {centres.shape}")
+    return centres, np.asarray(det["areas"], dtype=np.float64)
+
+
+def start_frame(centres, areas, joints_of, params: StartParams, fps: float) -> tuple[int, np.ndarray]:
+    """Row of the start frame and the 16 joints' pixels there; NodeError naming what is wrong otherwise."""
+    found = find_start(centres, areas, joints_of, params.init_frames, params.min_separation)
+    if not isinstance(found, PostureResult):
+        return found
+    n = min(params.init_frames, len(centres))
+    what = []
+    if found.missing:
+        what.append("patches not found: " + "; ".join(found.missing))
+    if found.problems:
+        what.append("posture: " + "; ".join(found.problems))
+    raise NodeError(
+        f"no start T-pose in the first {n} frames ({n / fps:.1f} s): in the closest frame, " + ". ".join(what),
+        hint="the actor must stand facing the camera in a T-pose, every patch visible, at the start of the video; "
+        "otherwise check the colour model (lighting, min_luma, tolerance_scale) or raise init_frames",
+    )
+
+
+def run_passes(candidates: Callable[[int], list[np.ndarray]], n: int, start: int, points0: np.ndarray,
+               make: Callable[[np.ndarray], FrameTracker]) -> tuple[np.ndarray, np.ndarray]:
+    """Track from ``start`` (joints at ``points0`` (16, 2)) forwards to row n-1 and backwards to row 0.
+
+    ``candidates(row)`` gives a frame's candidates per class; ``make(points0)`` a fresh tracker."""
+    points = np.full((n, N_JOINTS, 2), np.nan)
+    tracked = np.zeros((n, N_JOINTS), bool)
+    points[start] = points0
+    tracked[start] = True
+    for rows in (range(start + 1, n), range(start - 1, -1, -1)):
+        tr = make(points0)
+        for t in rows:
+            points[t], tracked[t] = tr.step(candidates(t))
+    return points, tracked
+
+
+def frame_candidates(centres: np.ndarray) -> Callable[[int], list[np.ndarray]]:
+    """``candidates(row)``: per class, the (k, 2) px centres of the filled slots of that frame."""
+
+    def get(t: int) -> list[np.ndarray]:
+        row = centres[t]
+        return [row[c][np.isfinite(row[c, :, 0])] for c in range(row.shape[0])]
+
+    return get
+
+
+def tracks_bundle(points, tracked, det: dict) -> dict[str, np.ndarray]:
+    n = len(points)
+    return {
+        "points": np.asarray(points, dtype=np.float64),
+        "tracked": np.asarray(tracked, dtype=bool),
+        "fps": np.asarray(float(det["fps"])),
+        "width": np.asarray(int(det["width"])),
+        "height": np.asarray(int(det["height"])),
+        "frame_index": np.asarray(det.get("frame_index", np.arange(n)), dtype=np.int64),
+    }
