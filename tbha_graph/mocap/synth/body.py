@@ -229,17 +229,20 @@ def build_body(joints: np.ndarray, shape: BodyShape | None = None) -> BodyGeomet
 # --------------------------------------------------------------------------------------------
 # rays leaving the body from inside (patch placement)
 # --------------------------------------------------------------------------------------------
-def _sphere_far(o: np.ndarray, d: np.ndarray, c: np.ndarray, r) -> np.ndarray:
-    """Far root of |o + t d - c| = r for unit d; -inf where the ray misses."""
+def _sphere_roots(o: np.ndarray, d: np.ndarray, c: np.ndarray, r) -> tuple[np.ndarray, np.ndarray]:
+    """Near and far roots of |o + t d - c| = r for unit d; (+inf, -inf) where the ray misses."""
     oc = o - c
     b = np.sum(oc * d, axis=-1)
     disc = b * b - (np.sum(oc * oc, axis=-1) - np.asarray(r) ** 2)
-    return np.where(disc >= 0, -b + np.sqrt(np.maximum(disc, 0.0)), -np.inf)
+    s = np.sqrt(np.maximum(disc, 0.0))
+    hit = disc >= 0
+    return np.where(hit, -b - s, np.inf), np.where(hit, -b + s, -np.inf)
 
 
-def _capsule_exit(o: np.ndarray, d: np.ndarray, a: np.ndarray, b: np.ndarray, r) -> np.ndarray:
-    """Ray parameter (...,) where ``o + t d`` leaves the round capsule (a, b, r); -inf if it never meets
-    it. The exit of a convex union is the largest exit of its parts."""
+def _capsule_roots(o: np.ndarray, d: np.ndarray, a: np.ndarray, b: np.ndarray, r) -> tuple[np.ndarray, np.ndarray]:
+    """Where the ray ``o + t d`` (unit d) enters and leaves the round capsule (a, b, r): (t_in, t_out),
+    (+inf, -inf) if it misses. A capsule is convex, the union of a finite cylinder and two balls: it is
+    entered at the smallest entry of its parts and left at the largest exit."""
     axis = b - a
     length = np.linalg.norm(axis, axis=-1)
     u = axis / np.maximum(length, 1e-12)[..., None]
@@ -251,26 +254,37 @@ def _capsule_exit(o: np.ndarray, d: np.ndarray, a: np.ndarray, b: np.ndarray, r)
     C = np.sum(op * op, axis=-1) - np.asarray(r) ** 2
     disc = B * B - A * C
     ok = (disc >= 0) & (A > 1e-12)
-    t_cyl = np.where(ok, (-B + np.sqrt(np.maximum(disc, 0.0))) / np.where(A > 1e-12, A, 1.0), -np.inf)
-    along = np.sum((oa + np.where(ok, t_cyl, 0.0)[..., None] * d) * u, axis=-1)
-    t_cyl = np.where(ok & (along >= 0) & (along <= length), t_cyl, -np.inf)
-    return np.maximum(t_cyl, np.maximum(_sphere_far(o, d, a, r), _sphere_far(o, d, b, r)))
+    s = np.sqrt(np.maximum(disc, 0.0))
+    A1 = np.where(A > 1e-12, A, 1.0)
+    t_cyl = []
+    for t in ((-B - s) / A1, (-B + s) / A1):
+        along = np.sum((oa + np.where(ok, t, 0.0)[..., None] * d) * u, axis=-1)
+        t_cyl.append(ok & (along >= 0) & (along <= length))
+        t_cyl.append(t)
+    in_a, out_a = _sphere_roots(o, d, a, r)
+    in_b, out_b = _sphere_roots(o, d, b, r)
+    t_in = np.minimum(np.where(t_cyl[0], t_cyl[1], np.inf), np.minimum(in_a, in_b))
+    t_out = np.maximum(np.where(t_cyl[2], t_cyl[3], -np.inf), np.maximum(out_a, out_b))
+    return t_in, t_out
 
 
-def primitive_exit(o: np.ndarray, d: np.ndarray, a: np.ndarray, b: np.ndarray, M: np.ndarray) -> np.ndarray:
-    """Distance (...,) along unit ``d`` from ``o`` to where the ray leaves the affine capsule (a, b, M)
-    (world units: the map is linear, so the ray parameter is unchanged); -inf if it misses."""
+def primitive_roots(o: np.ndarray, d: np.ndarray, a: np.ndarray, b: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distances (...,) along unit ``d`` from ``o`` to where the ray enters and leaves the affine capsule
+    (a, b, M) (world units: the map is linear, so only the direction's length changes, which is divided
+    out); (+inf, -inf) where it misses. Broadcasts over leading axes."""
     ol = np.einsum("...ij,...j->...i", M, o - a)
     dl = np.einsum("...ij,...j->...i", M, d)
     bl = np.einsum("...ij,...j->...i", M, b - a)
     scale = np.linalg.norm(dl, axis=-1)
-    return _capsule_exit(ol, dl / scale[..., None], np.zeros_like(bl), bl, 1.0) / scale
+    t_in, t_out = _capsule_roots(ol, dl / scale[..., None], np.zeros_like(bl), bl, 1.0)
+    return t_in / scale, t_out / scale
 
 
 def patch_directions(joints: np.ndarray) -> np.ndarray:
     """Unit outward direction (n, 15, 3) of each patch (order of PATCHED_JOINTS): the body's front,
     made perpendicular to the limb at limb joints (falling back towards the torso's up direction when
-    the limb points straight forward)."""
+    the limb points straight forward); at the ankles it is kept from pointing downwards, so the patch
+    stays on the lower shin when the shin tilts (the model's foot stays level)."""
     j = np.asarray(joints, dtype=np.float64)
     fr = body_frames(j)
     front_p, front_t = fr["pelvis"][..., 2, :], fr["thorax"][..., 2, :]
@@ -301,7 +315,10 @@ def patch_directions(joints: np.ndarray) -> np.ndarray:
         fn = np.linalg.norm(f, axis=-1, keepdims=True)
         g = _perp(up_t if "wrist" in name or "elbow" in name or "shoulder" in name else -up_t, axis)
         w = np.clip(0.3 - fn, 0.0, 0.3) / 0.3
-        out.append(_unit(f + w * _unit(g)))
+        n = _unit(f + w * _unit(g))
+        if "ankle" in name:  # keep the ankle patch on the lower shin, above the (always level) foot
+            n = _unit(n - np.minimum(n[..., 1:2], 0.0) * np.array([0.0, 1.0, 0.0]))
+        out.append(n)
     return np.stack(out, axis=-2)
 
 
@@ -315,7 +332,7 @@ def patch_centres(joints: np.ndarray, body: BodyGeometry) -> tuple[np.ndarray, n
         t = np.full(o.shape[:-1], -np.inf)
         for prim in PATCH_PRIMITIVES[name]:
             k = PRIM[prim]
-            t = np.maximum(t, primitive_exit(o, d, body.a[..., k, :], body.b[..., k, :], body.M[..., k, :, :]))
+            t = np.maximum(t, primitive_roots(o, d, body.a[..., k, :], body.b[..., k, :], body.M[..., k, :, :])[1])
         t = np.where(np.isfinite(t), t, 0.0)
         centres[..., p, :] = o + t[..., None] * d
     return centres, dirs

@@ -11,8 +11,9 @@ Keys (one ``.npz``, ``allow_pickle=False``; ``n`` = number of video frames, fram
 * ``patch_centers_world`` (n, 15, 3) float64, metres, world frame: centre of each coloured patch on
   the suit surface (order of :data:`tbha_graph.mocap.skeleton.PATCHED_JOINTS`).
 * ``patch2d`` (n, 15, 2) float64, pixels: the patch centres projected.
-* ``patch_visible`` (n, 15) bool: the patch centre is inside the image, its patch faces the camera,
-  and it is not hidden by the body (depth buffer of the rendered frame, 1.5 cm tolerance).
+* ``patch_visible`` (n, 15) bool: the patch centre projects inside the image and is not hidden by any
+  body volume (including its own, so a patch facing away is not visible): the depth test done exactly
+  along the ray through the centre, against the primitives the frame was rendered from.
 * ``K`` (3, 3) pixels; ``R`` (3, 3) and ``t`` (3,) metres: world -> camera, ``Xc = R @ Xw + t``.
 * ``fps`` () float frames/s; ``width``, ``height`` () int pixels.
 * ``joint_names`` (16,) str; ``suit`` () str: the suit spec as JSON (:class:`tbha_graph.mocap.suit.SuitSpec`).
@@ -25,28 +26,29 @@ import numpy as np
 from ..camera import Camera
 from ..skeleton import JOINT_NAMES, measure_bone_lengths
 from ..suit import SuitSpec
-from .body import PATCH_ALLOWED
-from .raster import Raster
+from .body import BodyGeometry, primitive_roots
 
-VISIBILITY_TOLERANCE = 0.015  # metres of depth between a patch centre and the visible surface
+VISIBILITY_TOLERANCE = 0.001  # metres: a surface this close in front of a patch centre does not hide it
 
 
-def patch_visibility(raster: Raster, centres_cam: np.ndarray, dirs_cam: np.ndarray) -> np.ndarray:
-    """(15,) bool: which patch centres (camera frame (15, 3) m, outward directions (15, 3)) are seen in
-    the frame currently held by ``raster``."""
+def patch_visibility(geom_cam: BodyGeometry, centres_cam: np.ndarray, camera: Camera) -> np.ndarray:
+    """(n, 15) bool: which patch centres (camera frame (n, 15, 3) metres) are seen by the camera.
+
+    A centre is seen when it projects inside the image and the ray from the camera to it enters no
+    body volume before reaching it: the depth-buffer test done exactly at the centre's sub-pixel position,
+    on the same primitives (``geom_cam``, camera frame, (n, ...)) the rasteriser draws. A centre on the
+    far side of its own volume (a patch facing away) is hidden by that volume.
+    """
     c = np.asarray(centres_cam, dtype=np.float64)
-    z = c[:, 2]
-    ok = z > 1e-6
-    zs = np.where(ok, z, 1.0)
-    u = np.rint(raster.K[0, 0] * c[:, 0] / zs + raster.K[0, 2]).astype(np.int64)
-    v = np.rint(raster.K[1, 1] * c[:, 1] / zs + raster.K[1, 2]).astype(np.int64)
-    ok &= (u >= 0) & (u < raster.width) & (v >= 0) & (v < raster.height)
-    ok &= np.sum(dirs_cam * -c, axis=1) > 0  # faces the camera (camera at the origin)
-    uc, vc = np.clip(u, 0, raster.width - 1), np.clip(v, 0, raster.height - 1)
-    depth = raster.depth[vc, uc]
-    prim = raster.prim[vc, uc]
-    on_patch = PATCH_ALLOWED[np.arange(c.shape[0]), np.where(prim >= 0, prim, 0)] & (prim >= 0)
-    return ok & on_patch & (depth >= z - VISIBILITY_TOLERANCE)
+    dist = np.linalg.norm(c, axis=-1)  # (n, 15)
+    d = c / dist[..., None]
+    o = np.zeros_like(c)
+    first = np.full(dist.shape, np.inf)
+    for k in range(geom_cam.a.shape[-2]):
+        t_in, _ = primitive_roots(o, d, geom_cam.a[:, None, k], geom_cam.b[:, None, k], geom_cam.M[:, None, k])
+        first = np.minimum(first, np.where(t_in > 0, t_in, np.inf))
+    inside = camera.in_image(camera.project_camera(c)) & (c[..., 2] > 0)
+    return inside & (first >= dist - VISIBILITY_TOLERANCE)
 
 
 def ground_truth(

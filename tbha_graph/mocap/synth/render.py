@@ -141,9 +141,11 @@ def render_video(
                 t_chunk = (times[i : i + CHUNK, None] + offsets[None, :]).reshape(-1)
                 jw = sampler.at(t_chunk)
                 geom = build_body(jw, p.body)
-                pc, pd = patch_centres(jw, geom)
+                pc, _ = patch_centres(jw, geom)
                 geom_cam = geom.transformed(cam.R, cam.t)
-                pc_cam, pd_cam = cam.to_camera(pc), pd @ cam.R.T
+                pc_cam = cam.to_camera(pc)
+                seen = patch_visibility(geom_cam, pc_cam, cam).reshape(-1, S, 15)[:, centre]
+                visible[i : i + CHUNK] = seen
                 if S == 1:
                     patch_world[i : i + CHUNK] = pc
                 else:  # ground truth at the frame time itself
@@ -155,8 +157,6 @@ def render_video(
                 if shadows:
                     contact_shadows(frame, floor_xz, jw[k], cam)
                 shader.shade_into(frame, pc_cam[k])
-                if s == centre:
-                    visible[i] = patch_visibility(raster, pc_cam[k], pd_cam[k])
                 if acc is not None:
                     if s == 0:
                         acc[:] = frame
