@@ -1,0 +1,199 @@
+"""``evaluate.metrics``: one flat dict of quality and accuracy figures for a capture, plus per-frame errors.
+
+Figures that need no ground truth (available for a user's own video):
+
+* ``frames``, ``video_fps`` (of the 2D tracks, i.e. of the video), ``tracked_pct``: % of the (frame,
+  joint) pairs of the tracks flagged ``tracked`` (16 joints: the head's dark hair counts as its patch).
+* ``reprojection_px_median`` / ``_p95``: the final 3D motion projected with the camera vs the tracked 2D
+  points (tracked pairs only), pixels.
+* ``bone_length_cv_pct``: mean over the 15 bones of std/mean of the bone's length over frames, %.
+* ``jitter_m_s3``: WHAM's jitter, mean |third difference| x fps^3 over frames and joints, m/s^3
+  (``raw_jitter_m_s3`` for ``raw_motion``, the motion before filtering, when connected).
+
+With ground truth (``truth`` connected and not ``{}``):
+
+* ``mpjpe_mm``: mean joint position error in the world frame after aligning the WHOLE clip to the truth
+  with ONE transform fitted over all frames and joints (``alignment`` param: ``similarity`` = Umeyama
+  rotation + translation + uniform scale (default), ``rigid`` = rotation + translation, ``none``). The
+  calibrated world frame is the calibration's own choice, so some alignment is needed; one transform for
+  the clip keeps drift, lean and per-frame errors in the figure. The fitted transform is reported as
+  ``alignment_scale``, ``alignment_rotation_deg``, ``alignment_translation_m``.
+* ``mpjpe_root_mm``: root-relative (hips subtracted per frame), no alignment: meaningful when the
+  calibrated world axes match the truth's (e.g. a known camera); includes the root (error 0).
+* ``pa_mpjpe_mm``: each frame aligned separately with a similarity (Procrustes), root-free shape error.
+* ``error_2d_px_median`` / ``_p95``: the tracks' 2D points (tracked or predicted) vs the truth's
+  ``joints2d`` (rescaled to the tracks' image size), for joints the truth marks visible.
+* ``accel_error_m_s2``: mean |acceleration - truth's acceleration| (second difference x fps^2), world
+  frame after the clip alignment; ``truth_jitter_m_s3``: the real motion's own jitter, for reference.
+* ``raw_mpjpe_mm``, ``raw_accel_error_m_s2`` for ``raw_motion`` (same alignment, fitted separately).
+* ``per_joint_mpjpe_mm``: nested ``{joint name: mm}`` (aligned, as ``mpjpe_mm``).
+
+A figure that cannot be computed (e.g. jitter of a clip shorter than 4 frames) is ``null``.
+
+Output ``errors`` (per frame, NaN where unavailable): ``mpjpe_mm``, ``mpjpe_root_mm``, ``pa_mpjpe_mm``,
+``error_2d_px``, ``reprojection_px`` (each ``(n_frames,)``, mean over the frame's joints), ``fps`` ().
+"""
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from ...core.errors import NodeError
+from ...core.node import node, optional
+from ...core.types import Array, Arrays
+from ..io.ground_truth import TRUTH, check_ground_truth, truth_joints2d, truth_visibility
+from ..ports import CAMERA, METRICS, MOTION, TRACKS2D
+from ..skeleton import JOINT_NAMES, N_JOINTS
+from . import measures as m
+
+_PER_FRAME = Array("float", ("n_frames",))
+ERRORS = Arrays(
+    {"mpjpe_mm": _PER_FRAME, "error_2d_px": _PER_FRAME, "reprojection_px": _PER_FRAME, "fps": Array("float", ())},
+    doc="per-frame errors (NaN where unavailable): mpjpe_mm, mpjpe_root_mm, pa_mpjpe_mm, error_2d_px, reprojection_px; fps",
+)
+
+
+class MetricsParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    alignment: Literal["similarity", "rigid", "none"] = Field(
+        "similarity",
+        description="how the motion's world frame is aligned to the truth's for mpjpe_mm: one transform for the "
+                    "whole clip, 'similarity' (rotation, translation, scale), 'rigid' (no scale) or 'none'",
+    )
+
+
+def _figure(x: float, digits: int = 4) -> float | None:
+    """A JSON-friendly figure: rounded, None for NaN/inf."""
+    x = float(x)
+    return round(x, digits) if math.isfinite(x) else None
+
+
+def _joints(bundle: dict, what: str) -> tuple[np.ndarray, float]:
+    j = np.asarray(bundle["joints"], dtype=np.float64)
+    fps = float(np.asarray(bundle["fps"]))
+    if j.ndim != 3 or j.shape[1:] != (N_JOINTS, 3) or j.shape[0] == 0:
+        raise NodeError(f"{what}: joints has shape {j.shape}, expected (n_frames > 0, {N_JOINTS}, 3)")
+    if not (math.isfinite(fps) and fps > 0):
+        raise NodeError(f"{what}: fps is {fps}, expected a positive number of frames per second")
+    return j, fps
+
+
+def _same_length(n: int, other: int, what: str) -> None:
+    if other != n:
+        raise NodeError(
+            f"{what} has {other} frames but the motion has {n}",
+            hint="evaluate the same frame range everywhere: give io.ground_truth the start/stop of io.video",
+        )
+
+
+def quality_figures(joints: np.ndarray, fps: float, tracks: dict, camera) -> tuple[dict, np.ndarray]:
+    """Figures needing no ground truth (see module docstring) and the per-frame reprojection error (n,) px."""
+    tracked = np.asarray(tracks["tracked"], dtype=bool)
+    reproj = m.reprojection_errors(joints, camera, tracks["points"], tracked)
+    figures = {
+        "tracked_pct": _figure(100.0 * tracked.mean()),
+        "reprojection_px_median": _figure(m.nan_percentile(reproj, 50)),
+        "reprojection_px_p95": _figure(m.nan_percentile(reproj, 95)),
+        "bone_length_cv_pct": _figure(100.0 * m.nan_mean(m.bone_length_cv(joints))),
+        "jitter_m_s3": _figure(m.jitter(joints, fps)),
+    }
+    return figures, m.frame_mean(reproj)
+
+
+def truth_figures(joints: np.ndarray, fps: float, truth: dict, alignment: str) -> tuple[dict, dict[str, np.ndarray]]:
+    """3D accuracy figures against ``truth['joints3d_world']`` and per-frame errors (mm)."""
+    gt = truth["joints3d_world"]
+    aligned, transform = m.align_clip(joints, gt, alignment)
+    err = m.joint_distances(aligned, gt) * 1000.0  # (n, 16) mm
+    err_root = m.joint_distances(m.root_relative(joints), m.root_relative(gt)) * 1000.0
+    err_pa = m.joint_distances(m.procrustes_per_frame(joints, gt), gt) * 1000.0
+    per_joint = m.joint_mean(err)
+    figures = {
+        "mpjpe_mm": _figure(m.nan_mean(err)),
+        "mpjpe_alignment": alignment,
+        "alignment_scale": _figure(transform["scale"]),
+        "alignment_rotation_deg": _figure(transform["rotation_deg"]),
+        "alignment_translation_m": _figure(transform["translation_m"]),
+        "mpjpe_root_mm": _figure(m.nan_mean(err_root)),
+        "pa_mpjpe_mm": _figure(m.nan_mean(err_pa)),
+        "accel_error_m_s2": _figure(m.accel_error(aligned, gt, fps)),
+        "truth_jitter_m_s3": _figure(m.jitter(gt, fps)),
+        "per_joint_mpjpe_mm": {name: _figure(v) for name, v in zip(JOINT_NAMES, per_joint)},
+    }
+    per_frame = {"mpjpe_mm": m.frame_mean(err), "mpjpe_root_mm": m.frame_mean(err_root), "pa_mpjpe_mm": m.frame_mean(err_pa)}
+    return figures, per_frame
+
+
+def compute_metrics(
+    motion: dict, tracks: dict, camera, truth: dict | None = None, raw_motion: dict | None = None, alignment: str = "similarity"
+) -> tuple[dict, dict[str, np.ndarray]]:
+    """The ``metrics`` dict and the ``errors`` bundle (see module docstring). ``camera`` is a
+    :class:`~tbha_graph.mocap.camera.Camera`; ``truth`` ``None`` or ``{}`` means no ground truth."""
+    joints, fps = _joints(motion, "motion")
+    n = joints.shape[0]
+    points = np.asarray(tracks["points"], dtype=np.float64)
+    if points.ndim == 3:
+        _same_length(n, points.shape[0], "the 2D tracks")
+    if points.shape != (n, N_JOINTS, 2) or np.shape(tracks["tracked"]) != (n, N_JOINTS):
+        raise NodeError(f"tracks: points {points.shape} / tracked {np.shape(tracks['tracked'])}, expected ({n}, {N_JOINTS}, 2) / ({n}, {N_JOINTS})")
+    metrics: dict = {"frames": int(n), "video_fps": _figure(float(np.asarray(tracks.get("fps", fps))))}
+    quality, reproj = quality_figures(joints, fps, tracks, camera)
+    metrics.update(quality)
+    nan = np.full(n, np.nan)
+    errors = {"mpjpe_mm": nan, "mpjpe_root_mm": nan, "pa_mpjpe_mm": nan, "error_2d_px": nan, "reprojection_px": reproj,
+              "fps": np.asarray(fps, dtype=np.float64)}
+
+    raw = None
+    if raw_motion is not None:
+        raw, _ = _joints(raw_motion, "raw_motion")
+        _same_length(n, raw.shape[0], "raw_motion")
+        metrics["raw_jitter_m_s3"] = _figure(m.jitter(raw, fps))
+
+    if truth:
+        truth = check_ground_truth(truth, "truth")
+        _same_length(n, truth["joints3d_world"].shape[0], "the ground truth")
+        figures, per_frame = truth_figures(joints, fps, truth, alignment)
+        errors.update(per_frame)
+        per_joint = figures.pop("per_joint_mpjpe_mm")
+        metrics.update(figures)
+        gt2d = truth_joints2d(truth, int(tracks["width"]) if "width" in tracks else None,
+                              int(tracks["height"]) if "height" in tracks else None)
+        if gt2d is not None:
+            e2d = m.masked_distances(points, gt2d, truth_visibility(truth))
+            metrics["error_2d_px_median"] = _figure(m.nan_percentile(e2d, 50))
+            metrics["error_2d_px_p95"] = _figure(m.nan_percentile(e2d, 95))
+            errors["error_2d_px"] = m.frame_mean(e2d)
+        if raw is not None:
+            raw_figures, _ = truth_figures(raw, fps, truth, alignment)
+            metrics["raw_mpjpe_mm"] = raw_figures["mpjpe_mm"]
+            metrics["raw_accel_error_m_s2"] = raw_figures["accel_error_m_s2"]
+        metrics["per_joint_mpjpe_mm"] = per_joint
+    return metrics, errors
+
+
+@node(
+    "evaluate.metrics",
+    version=1,
+    inputs={
+        "motion": MOTION,
+        "tracks": TRACKS2D,
+        "camera": CAMERA,
+        "truth": optional(TRUTH, "ground truth (io.ground_truth); {} or unconnected = none"),
+        "raw_motion": optional(MOTION, "the motion before filtering, to report what the filter changed"),
+    },
+    outputs={"metrics": METRICS, "errors": ERRORS},
+    params=MetricsParams,
+)
+def metrics(ctx, motion, tracks, camera, truth, raw_motion):
+    """Quality figures of a capture (reprojection, bone-length stability, jitter) and, with ground
+    truth, its accuracy (MPJPE, PA-MPJPE, 2D error, acceleration error); per-frame errors for plots.
+
+    Output ``metrics``: flat dict (units in the key names: _mm, _px, _pct, _m_s3...), plus the nested
+    ``per_joint_mpjpe_mm``. Output ``errors``: per-frame arrays (see tbha_graph.mocap.evaluate.metrics).
+    """
+    result, errors = compute_metrics(motion, tracks, camera.camera(), truth, raw_motion, ctx.params.alignment)
+    return {"metrics": result, "errors": errors}

@@ -1,0 +1,1 @@
+"""Visualisation: overlay videos, error plots and skeleton contact sheets."""

@@ -1,0 +1,130 @@
+"""``viz.overlay``: the input video with the capture drawn on it, written as an H.264 mp4.
+
+Layers, bottom to top (colours in :mod:`tbha_graph.mocap.viz.style`):
+
+* the 3D motion reprojected with the camera (optional ``motion`` + ``camera``): magenta skeleton;
+* the 2D tracks: yellow skeleton; tracked joints as filled dots, lost joints (the tracker's
+  prediction) as hollow circles;
+* ground truth (optional ``truth``): thin green crosses at the truth's ``joints2d`` (rescaled to the
+  video size), wider than the dots so they show where the tracks are right;
+* a legend (top left) and a frame counter with the time (bottom left).
+
+Frames are streamed one at a time (never the whole video in memory) and written with
+:func:`tbha_graph.mocap.io.video_writer.open_video_writer` (H.264 with PyAV, else mp4v with a logged note).
+Frame ``i`` of the tracks/motion/truth is frame ``i`` of the clip (``clip.start + i`` of the file).
+"""
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from ...core.errors import NodeError
+from ...core.node import node, optional
+from ...core.types import File
+from ..io.ground_truth import TRUTH, truth_joints2d
+from ..io.video import iter_frames
+from ..io.video_writer import open_video_writer
+from ..ports import CAMERA, MOTION, TRACKS2D, VIDEO, VideoClip
+from ..skeleton import N_JOINTS
+from . import draw, style
+
+
+class OverlayParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    dot_radius: int | None = Field(None, ge=1, le=50, description="joint dot radius; None = from the frame height (5 px at 480 px)",
+                                   json_schema_extra={"unit": "px"})
+    line_width: int | None = Field(None, ge=1, le=20, description="bone line width; None = from the frame height (2 px at 480 px)",
+                                   json_schema_extra={"unit": "px"})
+    legend: bool = Field(True, description="draw the legend and the frame counter")
+    draw_truth: bool = Field(True, description="draw the ground truth's joints when a truth is connected")
+    codec: Literal["auto", "h264", "mp4v"] = Field("auto", description="video codec: auto = H.264 when PyAV is installed, else mp4v")
+
+
+def _check_frames(n: int, array: np.ndarray, what: str, tail: tuple[int, ...]) -> np.ndarray:
+    a = np.asarray(array)
+    if a.shape != (n, *tail):
+        hint = ("give io.ground_truth the start/stop of io.video" if "truth" in what
+                else "connect data computed from this same video clip (same io.video start/stop)")
+        raise NodeError(f"{what} has shape {a.shape} but the video clip has {n} frames: expected {(n, *tail)}", hint=hint)
+    return a
+
+
+class OverlayLayers:
+    """Everything drawn on the frames, checked once: ``points``/``tracked`` (n, 16, 2)/(n, 16) of the
+    tracks, optional ``reprojected`` (n, 16, 2) px and ``truth2d`` (n, 16, 2) px."""
+
+    def __init__(self, n: int, clip: VideoClip, tracks: dict, motion: dict | None, camera, truth: dict | None, draw_truth: bool):
+        self.points = _check_frames(n, tracks["points"], "tracks 'points'", (N_JOINTS, 2)).astype(np.float64)
+        self.tracked = _check_frames(n, tracks["tracked"], "tracks 'tracked'", (N_JOINTS,)).astype(bool)
+        if (motion is None) != (camera is None):
+            raise NodeError("viz.overlay: 'motion' and 'camera' are connected together (the motion is drawn by "
+                            "projecting it with the camera); only one of them is connected",
+                            hint="connect both inputs, or neither")
+        self.reprojected = None
+        if motion is not None:
+            joints = _check_frames(n, motion["joints"], "motion 'joints'", (N_JOINTS, 3)).astype(np.float64)
+            cam = camera.camera()
+            with np.errstate(divide="ignore", invalid="ignore"):
+                proj = cam.project(joints)
+            self.reprojected = np.where((cam.to_camera(joints)[..., 2] > 1e-9)[..., None], proj, np.nan)
+        self.truth2d = None
+        if truth and draw_truth:
+            gt = truth_joints2d(truth, clip.width, clip.height)
+            if gt is not None:
+                self.truth2d = _check_frames(n, gt, "ground truth 'joints2d'", (N_JOINTS, 2))
+
+    def legend(self) -> list[tuple[str, str, tuple[int, int, int]]]:
+        entries = [("dot", "tracked joint", style.TRACKS_BGR), ("ring", "lost joint (predicted)", style.TRACKS_BGR)]
+        if self.reprojected is not None:
+            entries.append(("line", "3D motion reprojected", style.REPROJECTED_BGR))
+        if self.truth2d is not None:
+            entries.append(("cross", "ground truth", style.TRUTH_BGR))
+        return entries
+
+
+def draw_overlay(frame: np.ndarray, i: int, layers: OverlayLayers, sizes: draw.Sizes) -> np.ndarray:
+    """Draw frame ``i``'s layers on ``frame`` (BGR uint8, modified in place and returned); no legend."""
+    if layers.reprojected is not None:
+        draw.draw_bones(frame, layers.reprojected[i], style.REPROJECTED_BGR, sizes.line)
+    draw.draw_bones(frame, layers.points[i], style.TRACKS_BGR, sizes.line)
+    draw.draw_dots(frame, layers.points[i], layers.tracked[i], style.TRACKS_BGR, sizes.dot, sizes.line)
+    if layers.truth2d is not None:  # thin crosses on top, reaching beyond the dots: visible where the tracks are right
+        draw.draw_markers(frame, layers.truth2d[i], style.TRUTH_BGR, 2 * sizes.dot + 8, 1)
+    return frame
+
+
+@node(
+    "viz.overlay",
+    version=1,
+    inputs={
+        "video": VIDEO,
+        "tracks": TRACKS2D,
+        "motion": optional(MOTION, "3D motion to reproject and draw (needs 'camera')"),
+        "camera": optional(CAMERA, "camera of the motion"),
+        "truth": optional(TRUTH, "ground truth (io.ground_truth); {} = none"),
+    },
+    outputs={"video": File(kind="video", suffix=".mp4")},
+    params=OverlayParams,
+)
+def overlay(ctx, video, tracks, motion, camera, truth):
+    """Draw the 2D tracks (filled dots: tracked, hollow: lost), the reprojected 3D skeleton and the
+    ground truth on the video, with a legend and frame counter; writes an H.264 mp4 (same size, fps
+    and frame count as the input clip)."""
+    p: OverlayParams = ctx.params
+    clip = video if isinstance(video, VideoClip) else VideoClip.model_validate(video)
+    n = clip.n_frames
+    layers = OverlayLayers(n, clip, tracks, motion, camera, truth, p.draw_truth)
+    sizes = draw.Sizes.for_frame(clip.height, p.dot_radius, p.line_width)
+    entries = layers.legend()
+    path = ctx.output_path("overlay.mp4")
+    with open_video_writer(path, clip.fps, clip.width, clip.height, p.codec, note=ctx.log) as writer:
+        for i, (index, frame) in enumerate(ctx.progress(iter_frames(clip), total=n, desc="overlay")):
+            draw_overlay(frame, i, layers, sizes)
+            if p.legend:
+                draw.draw_legend(frame, entries, sizes)
+                draw.draw_counter(frame, f"frame {index}  ({i + 1}/{n})  {i / clip.fps:.2f} s", sizes)
+            writer.write(frame)
+    return {"video": path}

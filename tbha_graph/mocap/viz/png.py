@@ -1,0 +1,29 @@
+"""Saving a matplotlib figure as a PNG atomically (temporary file in the same folder, then rename)."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+
+def save_png(fig, path: str | Path, dpi: int) -> Path:
+    """Write ``fig`` (a ``matplotlib.figure.Figure``) to ``path`` as PNG at ``dpi``; nothing is left
+    at ``path`` if saving fails."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}.png")
+    try:
+        fig.savefig(tmp, format="png", dpi=dpi)
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return path
+
+
+def new_figure(width_in: float, height_in: float):
+    """A matplotlib ``Figure`` drawn with Agg, without pyplot's global state (safe in worker threads)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width_in, height_in), layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
