@@ -173,6 +173,55 @@ def test_bad_motion_and_params_are_refused(tmp_path):
         render(tmp_path, motion, cam, noise_sigma=-1.0)
 
 
+def test_suit_port_camera_rescale_and_motion_blur(tmp_path):
+    """A suit given on the port is drawn; a camera of another size is rescaled; motion blur smears a
+    moving arm but leaves the ground truth at the frame time."""
+    suit = load_suit()
+    custom = suit.model_copy(update={"colors": {**suit.colors, "purple": "#20d040"}})  # chest patch now green
+    pose = standing_tpose()
+    small = front_camera(160, 120, 210.0)  # the video is twice as large
+    out = run_node(
+        render_suit_video, {"width": 320, "height": 240, **CLEAN}, work_dir=tmp_path,
+        motion={"joints": pose[None], "fps": np.array(30.0)}, camera=small.to_model(), suit=custom,
+    )
+    gt = out["ground_truth"]
+    assert (int(gt["width"]), int(gt["height"])) == (320, 240)
+    np.testing.assert_allclose(gt["K"][0, 0], 420.0)
+    np.testing.assert_allclose(gt["joints2d"][0], (small.project(pose) + 0.5) * 2 - 0.5, atol=1e-9)
+    img = read_frames(out["video"])[0]
+    u, v = np.rint(gt["patch2d"][0, sk.PATCHED_JOINTS.index("chest")]).astype(int)
+    assert colour_mask(img[v - 1 : v + 2, u - 1 : u + 2], np.array([0x20, 0xD0, 0x40]) / 255).all()
+    with pytest.raises(NodeError, match="suit"):
+        run_node(render_suit_video, {"suit": str(ROOT / "tbha_graph" / "mocap" / "suit_default.yaml")},
+                 work_dir=tmp_path, motion={"joints": pose[None], "fps": np.array(30.0)}, camera=small.to_model(), suit=custom)
+
+    # the left arm sweeps down fast: with motion blur it covers more of the (plain) background, and
+    # its wrist patch is smeared, so no pixel keeps the patch's full colour
+    n = 5
+    motion = np.repeat(pose[None], n, axis=0)
+    sh = pose[J["left_shoulder"]]
+    for i, ang in enumerate(np.linspace(0.0, 1.2, n)):
+        for name in ("left_elbow", "left_wrist"):
+            r = pose[J[name], 0] - sh[0]
+            motion[i, J[name]] = sh + r * np.array([np.cos(ang), -np.sin(ang), 0.0])
+    cam = front_camera(320, 240, 420.0)
+    magenta = load_suit().patch_rgb()[sk.PATCHED_JOINTS.index("left_wrist")]
+    counts, strong, gts = [], [], []
+    for samples in (1, 5):
+        (tmp_path / f"mb{samples}").mkdir()
+        video, gt = render(tmp_path / f"mb{samples}", motion, cam, motion_blur_samples=samples, shutter=1.0,
+                           background="plain", background_color="#808080", **CLEAN)
+        frame = read_frames(video)[2].astype(int)
+        counts.append(int((np.abs(frame - 128).sum(axis=-1) > 24).sum()))  # body pixels
+        u, v = np.rint(gt["joints2d"][2, J["left_wrist"]]).astype(int)
+        strong.append(int(colour_mask(frame[v - 30 : v + 31, u - 30 : u + 31].astype(np.uint8), magenta).sum()))
+        gts.append(gt)
+    assert counts[1] > counts[0] + 150, counts
+    assert strong[0] > 20 and strong[1] < strong[0] / 2, strong
+    for key in ("joints2d", "patch2d", "patch_visible"):
+        np.testing.assert_array_equal(gts[0][key], gts[1][key])
+
+
 def test_default_camera_frames_the_whole_body():
     cam = run_node(camera_node)["camera"].camera()
     assert (cam.width, cam.height) == (640, 480)

@@ -20,7 +20,8 @@ NEAR = 0.05  # metres: primitives with any part nearer than this are not drawn
 
 
 class Raster:
-    """Depth, primitive-id and normal buffers of one image, and the per-pixel ray directions."""
+    """Depth and primitive-id buffers of one image, the per-pixel ray directions, and what is needed to
+    compute normals of the visible pixels."""
 
     def __init__(self, K: np.ndarray, width: int, height: int):
         K = np.asarray(K, dtype=np.float64)

@@ -5,7 +5,8 @@ resample the motion at the video frame rate (linear interpolation), build the bo
 chunk of frames at once, ray-cast them into a depth buffer (:mod:`.raster`), paint the patches and
 shade (:mod:`.shading`) over a precomputed background with contact shadows (:mod:`.background`), then
 apply optics blur, exposure flicker and sensor noise (:mod:`.sensor`). Motion blur averages
-``motion_blur_samples`` sub-frames spread over the shutter time. Everything is deterministic for a
+``motion_blur_samples`` sub-frames spread evenly over the shutter time (centred on the frame time);
+the ground truth is always the pose at the frame time itself. Everything is deterministic for a
 given ``seed``.
 """
 from __future__ import annotations
@@ -102,8 +103,11 @@ def render_video(
     check_motion(joints, float(motion_fps))
     p = params
     cam = fit_camera(camera, p.width, p.height)
-    if np.any(cam.dist):
-        raise NodeError("the renderer draws an ideal pinhole camera: the camera's lens distortion must be zero")
+    if np.any(cam.dist) or abs(cam.K[0, 1]) > 1e-9:
+        raise NodeError(
+            "the renderer draws an ideal pinhole camera: the camera's lens distortion and skew must be zero",
+            hint="place the camera with synth.camera, or zero 'dist' and K[0][1]",
+        )
     sampler = MotionSampler(joints, motion_fps)
     n = sampler.n_frames(p.fps)
     times = np.arange(n) / p.fps
@@ -117,7 +121,6 @@ def render_video(
         )
     S = p.motion_blur_samples
     offsets = (np.arange(S) / (S - 1) - 0.5) * p.shutter / p.fps if S > 1 else np.zeros(1)
-    centre = int(np.argmin(np.abs(offsets)))
 
     raster = Raster(cam.K, cam.width, cam.height)
     shader = Shader(raster, p.lighting, cam.R, hex_rgb(suit.suit_color), suit.patch_rgb(), suit.patch_radius)
@@ -138,18 +141,21 @@ def render_video(
     try:
         for i in frames:
             if i % CHUNK == 0:
-                t_chunk = (times[i : i + CHUNK, None] + offsets[None, :]).reshape(-1)
-                jw = sampler.at(t_chunk)
-                geom = build_body(jw, p.body)
-                pc, _ = patch_centres(jw, geom)
-                geom_cam = geom.transformed(cam.R, cam.t)
-                pc_cam = cam.to_camera(pc)
-                seen = patch_visibility(geom_cam, pc_cam, cam).reshape(-1, S, 15)[:, centre]
-                visible[i : i + CHUNK] = seen
+                # ground truth at the frame times themselves
+                exact = world[i : i + CHUNK]
+                g_exact = build_body(exact, p.body)
+                patch_world[i : i + CHUNK] = patch_centres(exact, g_exact)[0]
+                g_exact_cam = g_exact.transformed(cam.R, cam.t)
+                visible[i : i + CHUNK] = patch_visibility(g_exact_cam, cam.to_camera(patch_world[i : i + CHUNK]), cam)
+                # what is drawn: the same, or the sub-frames spread over the shutter time
                 if S == 1:
-                    patch_world[i : i + CHUNK] = pc
-                else:  # ground truth at the frame time itself
-                    patch_world[i : i + CHUNK] = patch_centres(world[i : i + CHUNK], build_body(world[i : i + CHUNK], p.body))[0]
+                    jw, geom_cam, pc = exact, g_exact_cam, patch_world[i : i + CHUNK]
+                else:
+                    jw = sampler.at((times[i : i + CHUNK, None] + offsets[None, :]).reshape(-1))
+                    geom = build_body(jw, p.body)
+                    pc = patch_centres(jw, geom)[0]
+                    geom_cam = geom.transformed(cam.R, cam.t)
+                pc_cam = cam.to_camera(pc)
             for s in range(S):
                 k = (i % CHUNK) * S + s
                 raster.draw_body(geom_cam, k)
