@@ -178,8 +178,3 @@ class Raster:
         self.clear()
         for k in range(geom.a.shape[-2]):
             self.draw_primitive(k, geom.a[i, k], geom.b[i, k], geom.M[i, k], float(geom.round_r[k]))
-
-    def points(self, v0: int, v1: int, u0: int, u1: int) -> np.ndarray:
-        """Camera-frame surface points (h, w, 3) metres of a pixel box (inf where background)."""
-        z = self.depth[v0:v1, u0:u1]
-        return np.stack([self.dx[None, u0:u1] * z, self.dy[v0:v1, None] * z, z], axis=-1)

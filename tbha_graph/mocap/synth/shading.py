@@ -8,7 +8,7 @@ turned into the camera frame once per video. A weak fill light sits at the camer
 from __future__ import annotations
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from .body import MATERIAL_HAIR, N_PRIMITIVES, PATCH_ALLOWED, PRIMITIVE_MATERIAL
 from .raster import Raster
@@ -43,6 +43,13 @@ class Lighting(BaseModel):
     ambient: float = Field(0.22, ge=0, le=2, description="ambient light intensity")
     specular: float = Field(0.35, ge=0, le=4, description="specular highlight strength of the suit fabric")
     shininess: float = Field(28.0, gt=0, le=1000, description="Blinn-Phong exponent (higher = smaller highlight)")
+
+    @field_validator("direction")
+    @classmethod
+    def _nonzero(cls, v: tuple[float, float, float]) -> tuple[float, float, float]:
+        if float(np.linalg.norm(v)) < 1e-9:
+            raise ValueError("the key light direction must not be the zero vector")
+        return v
 
 
 def material_albedo(suit_rgb: np.ndarray) -> np.ndarray:
