@@ -192,7 +192,7 @@ def open_video_writer(
     codec: str = "auto",
     *,
     crf: int = DEFAULT_CRF,
-    preset: str = "veryfast",
+    preset: str = "superfast",
     note: Callable[[str], None] | None = None,
 ) -> VideoWriter:
     """Open an atomic video writer for ``path`` (frames BGR ``uint8`` ``(height, width, 3)``, ``fps`` Hz).

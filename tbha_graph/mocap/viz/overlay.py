@@ -88,7 +88,8 @@ class OverlayLayers:
 def draw_overlay(frame: np.ndarray, i: int, layers: OverlayLayers, sizes: draw.Sizes) -> np.ndarray:
     """Draw frame ``i``'s layers on ``frame`` (BGR uint8, modified in place and returned); no legend."""
     if layers.reprojected is not None:
-        draw.draw_bones(frame, layers.reprojected[i], style.REPROJECTED_BGR, sizes.line)
+        # wider than the tracks' bones: a magenta rim shows around them where 3D and 2D agree
+        draw.draw_bones(frame, layers.reprojected[i], style.REPROJECTED_BGR, sizes.line + 2)
     draw.draw_bones(frame, layers.points[i], style.TRACKS_BGR, sizes.line)
     draw.draw_dots(frame, layers.points[i], layers.tracked[i], style.TRACKS_BGR, sizes.dot, sizes.line)
     if layers.truth2d is not None:  # thin crosses on top, reaching beyond the dots: visible where the tracks are right

@@ -55,58 +55,77 @@ def posture(joints: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return lean, heading, facing
 
 
-def _draw_figure(ax, p2: np.ndarray, facing2: np.ndarray, chest: np.ndarray, arrow: float) -> None:
-    """Stick figure of ``p2`` ``(16, 2)`` (horizontal, vertical) metres on ``ax``."""
-    for a, b in BONES:
-        if np.isfinite(p2[[a, b]]).all():
-            ax.plot(p2[[a, b], 0], p2[[a, b], 1], color=style.rgb(style.side_color(b)), lw=2.0, solid_capstyle="round")
-    ok = np.isfinite(p2).all(-1)
-    ax.scatter(p2[ok, 0], p2[ok, 1], s=6, color="black", zorder=3)
-    if ok[_HEAD]:
-        ax.scatter(p2[_HEAD, 0], p2[_HEAD, 1], s=90, facecolors="none", edgecolors=style.rgb(style.CENTRE_BGR), zorder=3)
-    if np.isfinite(facing2).all() and np.isfinite(chest).all():
-        ax.annotate("", xy=tuple(chest + arrow * facing2), xytext=tuple(chest),
-                    arrowprops={"arrowstyle": "-|>", "color": "0.45", "lw": 1.5})
+def _draw_row(ax, figures: list[np.ndarray], arrows: list[tuple[np.ndarray, np.ndarray]]) -> None:
+    """Stick figures ``(16, 2)`` (horizontal, vertical) metres, already placed side by side, on one
+    axes; ``arrows``: (start, end) of each figure's facing arrow (skipped when not finite)."""
+    from matplotlib.collections import LineCollection
+
+    segments, colors, heads = [], [], []
+    for p2 in figures:
+        ok = np.isfinite(p2).all(-1)
+        for a, b in BONES:
+            if ok[a] and ok[b]:
+                segments.append(p2[[a, b]])
+                colors.append(style.rgb(style.side_color(int(b))))
+        ax.scatter(p2[ok, 0], p2[ok, 1], s=6, color="black", zorder=3)
+        if ok[_HEAD]:
+            heads.append(p2[_HEAD])
+    ax.add_collection(LineCollection(segments, colors=colors, linewidths=2.0, capstyle="round"))
+    if heads:
+        h = np.array(heads)
+        ax.scatter(h[:, 0], h[:, 1], s=90, facecolors="none", edgecolors=style.rgb(style.CENTRE_BGR), zorder=3)
+    for start, end in arrows:
+        if np.isfinite(start).all() and np.isfinite(end).all():
+            ax.annotate("", xy=tuple(end), xytext=tuple(start), arrowprops={"arrowstyle": "-|>", "color": "0.45", "lw": 1.5})
 
 
 def plot_sheet(joints: np.ndarray, fps: float, path, n_shown: int = 8, title: str = "", dpi: int = 100):
-    """Draw the contact sheet (see module docstring) of ``joints`` ``(n, 16, 3)`` metres to ``path``."""
+    """Draw the contact sheet (see module docstring) of ``joints`` ``(n, 16, 3)`` metres to ``path``.
+
+    One axes per view; the frames are placed side by side in it, each centred on its root, so all
+    figures share one scale (metres on the vertical axis)."""
     j = np.asarray(joints, dtype=np.float64)
     n = j.shape[0]
     idx = np.unique(np.rint(np.linspace(0, n - 1, min(n_shown, n))).astype(int))
     lean, heading, facing = posture(j)
     sel = j[idx]
     root = sel[:, _HIPS]
-    # views: (horizontal axis, sign) -> front: +x; side: +z
-    views = (("front (from +z)", 0), ("side (from the actor's right, -x)", 2))
+    views = (("front (from +z)\ny (m)", 0), ("side (from the actor's right, -x)\ny (m)", 2))  # horizontal axis: +x, +z
     rel = np.concatenate([np.abs(sel[..., 0] - root[:, None, 0]), np.abs(sel[..., 2] - root[:, None, 2])], axis=1)
-    half = float(np.nanmax(rel)) + 0.15 if np.isfinite(rel).any() else 1.0
-    floor = float(np.nanmin(j[..., 1]))
-    top = float(np.nanmax(j[..., 1]))
-    half = max(half, 0.3 * (top - floor))
+    floor, top = float(np.nanmin(j[..., 1])), float(np.nanmax(j[..., 1]))
+    half = max((float(np.nanmax(rel)) if np.isfinite(rel).any() else 0.0) + 0.15, 0.3 * (top - floor))
     cols = len(idx)
-    fig = new_figure(1.6 * cols + 0.8, 2 * (top - floor + 0.3) / (2 * half) * 1.6 + 1.0)
-    axes = fig.subplots(2, cols, squeeze=False, sharey=True)
+    width_m, height_m = 2 * half * cols, top - floor + 0.6  # the row's extent in metres
+    scale = 1.6 / (2 * half)  # inches per metre: 1.6 in per figure
+    fig_w, fig_h = 0.8 + width_m * scale + 0.2, 2 * height_m * scale + 1.3
+    fig = new_figure(fig_w, fig_h, constrained=False)
+    fig.subplots_adjust(left=0.8 / fig_w, right=1 - 0.2 / fig_w, bottom=0.1 / fig_h, top=1 - 0.7 / fig_h, hspace=0.5 / (height_m * scale))
+    axes = fig.subplots(2, 1)
+    for ax, (label, axis) in zip(axes, views):
+        figures, arrows = [], []
+        for c, f in enumerate(idx):
+            centre = (2 * c + 1) * half
+            shift = centre - root[c, axis]
+            figures.append(np.stack([sel[c, :, axis] + shift, sel[c, :, 1]], axis=1))
+            start = np.array([sel[c, _CHEST, axis] + shift, sel[c, _CHEST, 1]])
+            arrows.append((start, start + 0.3 * np.array([facing[f, axis], facing[f, 1]])))
+        _draw_row(ax, figures, arrows)
+        ax.axhline(floor, color="0.6", lw=1.0)
+        for c in range(1, cols):
+            ax.axvline(2 * c * half, color="0.85", lw=0.8)
+        ax.set_xlim(0.0, width_m)
+        ax.set_ylim(floor - 0.1, top + 0.5)
+        ax.set_aspect("equal")
+        ax.set_xticks([])
+        ax.set_ylabel(label, fontsize=8)
+        ax.tick_params(labelsize=7)
     for c, f in enumerate(idx):
-        chest = sel[c, _CHEST]
-        for r, (label, axis) in enumerate(views):
-            ax = axes[r, c]
-            h = sel[c, :, axis] - root[c, axis]
-            _draw_figure(ax, np.stack([h, sel[c, :, 1]], axis=1), np.array([facing[f, axis], facing[f, 1]]),
-                         np.array([chest[axis] - root[c, axis], chest[1]]), 0.3)
-            ax.axhline(floor, color="0.6", lw=1.0)
-            ax.set_xlim(-half, half)
-            ax.set_ylim(floor - 0.1, top + 0.2)
-            ax.set_aspect("equal")
-            ax.set_xticks([])
-            if c == 0:
-                ax.set_ylabel(f"{label}\ny (m)", fontsize=8)
-            ax.tick_params(labelsize=7)
-        axes[0, c].set_title(f"frame {f} ({f / fps:.2f} s)\nlean {lean[f]:.0f}°, heading {heading[f]:+.0f}°", fontsize=8)
+        axes[0].text((2 * c + 1) * half, top + 0.45, f"frame {f} ({f / fps:.2f} s)\nlean {lean[f]:.0f}°, heading {heading[f]:+.0f}°",
+                     ha="center", va="top", fontsize=7)
     verdict = (f"spine lean from +y: median {np.nanmedian(lean):.0f}° — heading from +z: median {np.nanmedian(heading):+.0f}°"
                if np.isfinite(lean).any() else "posture undefined (non-finite joints)")
     fig.suptitle(title or f"Skeleton contact sheet, y up — {verdict}\nleft side blue, right side red, grey arrow = facing",
-                 fontsize=9)
+                 fontsize=9, y=1 - 0.08 / fig_h, va="top")
     return save_png(fig, path, dpi)
 
 
