@@ -2,14 +2,21 @@
 
 A :class:`ColorModel` lists one :class:`ColourClass` per patch colour (with the joints wearing it) plus
 a last class ``"head"`` of kind ``"dark"`` for the head's dark hair (seed 000: the head's "black patch").
-Each patch colour has a reference point in the space's chroma plane (see
-:mod:`tbha_graph.mocap.color.spaces`) and a tolerance radius in the same units; a pixel belongs to the
-colour when its chroma lies within the radius and its luma is at least ``min_luma`` (darker pixels
-have unreliable chroma). The white suit is the chroma point ``suit_ref``; a pixel that is no patch
-colour is "dark" (head) when its luma is below ``dark_max_luma``.
+Each patch colour has a reference point ``ref`` in the space's chroma plane (see
+:mod:`tbha_graph.mocap.color.spaces`), a "pale" point ``pale`` part of the way from ``ref`` towards the
+suit's white (a patch under a specular sheen, or with a channel clipped, is the colour mixed with
+white, whose chromaticity lies on the ray from the white through ``ref``), and a tolerance ``tol`` in
+the same units. A pixel belongs to the colour when its chroma lies in the colour's wedge
+(:func:`~tbha_graph.mocap.color.spaces.wedge_distance_sq`: along the ray from ``pale`` to ``tol``
+beyond ``ref``, within ``tol`` of the ray at ``ref``, proportionally less towards the white), not
+within ``suit_tol`` of the suit's white ``suit_ref``, and its luma is at least ``min_luma`` (darker
+pixels have unreliable chroma). A pixel that is no patch colour is "dark" (head) when its luma is below
+``dark_max_luma``.
 
 Tolerances are derived from the suit: ``tol = tolerance_scale * (distance to the nearest other colour
-or to the suit's white) / 2``, so colour regions never overlap while ``tolerance_scale <= 1``.
+or to the suit's white) / 2``, so the saturated ends of the colour regions never overlap while
+``tolerance_scale <= 1``; nor do the wedges, which narrow towards the white (where they would meet, a
+pixel goes to the nearest).
 """
 from __future__ import annotations
 
@@ -34,6 +41,9 @@ class ColourClass(BaseModel):
     kind: Literal["chroma", "dark"] = Field(description="'chroma': a patch colour; 'dark': the head's hair")
     joints: list[str] = Field(description="joints wearing this colour (same-coloured patches)")
     ref: tuple[float, float] = Field((0.0, 0.0), description="reference chroma (c1, c2), space units")
+    pale: tuple[float, float] | None = Field(
+        None, description="palest accepted chroma (the colour mixed with the suit's white); None = ref"
+    )
     tol: float = Field(0.0, ge=0, description="tolerance radius around ref in the chroma plane, space units")
 
 
@@ -54,6 +64,13 @@ class ColorModel(BaseModel):
     def names(self) -> list[str]:
         return [c.name for c in self.classes]
 
+    def segments(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``ref`` (C, 2), ``pale`` (C, 2) and ``tol`` (C,) of every class (zeros for the dark class)."""
+        ref = np.array([c.ref for c in self.classes], dtype=np.float64)
+        pale = np.array([c.pale if c.pale is not None else c.ref for c in self.classes], dtype=np.float64)
+        tol = np.array([c.tol for c in self.classes], dtype=np.float64)
+        return ref, pale, tol
+
     def chroma_classes(self) -> list[ColourClass]:
         return [c for c in self.classes if c.kind == "chroma"]
 
@@ -73,6 +90,10 @@ class ColorParams(BaseModel):
         0.9, gt=0, le=1.0,
         description="tolerance radius as a fraction of half the chroma distance to the nearest other colour",
     )
+    desaturation: float = Field(
+        0.55, ge=0, lt=1,
+        description="how far from a colour towards the suit's white its pixels may lie (sheen, highlights, clipping)",
+    )
     min_luma: float = Field(
         30.0, ge=0, le=255, description="darker pixels are not classified as patch colours",
         json_schema_extra={"unit": "grey level"},
@@ -84,7 +105,7 @@ class ColorParams(BaseModel):
 
 
 def build_color_model(space: str, suit: SuitSpec, tolerance_scale: float = 0.9, min_luma: float = 30.0,
-                      dark_max_luma: float = 45.0) -> ColorModel:
+                      dark_max_luma: float = 45.0, desaturation: float = 0.55) -> ColorModel:
     """The colour model of ``suit`` in ``space`` (``"rg"``, ``"hsv"`` or ``"lab"``).
 
     References are the suit's sRGB colours converted with the same function the segmenters use.
@@ -109,8 +130,12 @@ def build_color_model(space: str, suit: SuitSpec, tolerance_scale: float = 0.9, 
             hint="give the suit clearly different colours (different hue/saturation, not just brightness)",
         )
     tols = tolerance_scale * nearest / 2.0
+    pales = refs + desaturation * (suit_ref[None] - refs)
     classes = [
-        ColourClass(name=n, kind="chroma", joints=by_colour[n], ref=(float(refs[k, 0]), float(refs[k, 1])), tol=float(tols[k]))
+        ColourClass(
+            name=n, kind="chroma", joints=by_colour[n], ref=(float(refs[k, 0]), float(refs[k, 1])),
+            pale=(float(pales[k, 0]), float(pales[k, 1])), tol=float(tols[k]),
+        )
         for k, n in enumerate(names)
     ]
     classes.append(ColourClass(name=HEAD_CLASS, kind="dark", joints=["head"]))
@@ -127,7 +152,7 @@ def color_model_node(ctx: Any, suit: SuitSpec | None, space: str) -> dict:
         suit = load_suit(p.suit)
     elif not isinstance(suit, SuitSpec):
         suit = SuitSpec.model_validate(suit)
-    return {"model": build_color_model(space, suit, p.tolerance_scale, p.min_luma, p.dark_max_luma)}
+    return {"model": build_color_model(space, suit, p.tolerance_scale, p.min_luma, p.dark_max_luma, p.desaturation)}
 
 
 def as_color_model(value: Any) -> ColorModel:

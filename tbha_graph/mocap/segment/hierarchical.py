@@ -14,6 +14,7 @@ the video frames as streamed (after io.video's downscale).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -58,12 +59,17 @@ class HierarchicalParams(BaseModel):
     peak_fraction: float = Field(
         0.3, gt=0, le=1, description="a boundary-histogram peak must hold this fraction of the highest bin"
     )
+    centre: Literal["rectangle", "centroid"] = Field(
+        "rectangle",
+        description="patch centre: 'rectangle' = centre of the boundary-histogram rectangle (seed 000); "
+        "'centroid' = centroid of the merged region",
+    )
     lost_search_every: int = Field(
         2, ge=1, description="while a patch is lost, search the whole frame every this many frames",
         json_schema_extra={"unit": "frame"},
     )
     full_search_every: int = Field(
-        30, ge=0, description="search the whole frame every this many frames anyway (0 = only when lost)",
+        0, ge=0, description="search the whole frame every this many frames anyway (0 = only when lost)",
         json_schema_extra={"unit": "frame"},
     )
 
@@ -73,7 +79,6 @@ class _Blob:
     cls: int
     pos: np.ndarray  # (2,) px
     vel: np.ndarray = field(default_factory=lambda: np.zeros(2))
-    mean: np.ndarray = field(default_factory=lambda: np.zeros(2))
     diameter: float = 0.0
     area: float = 0.0
     box: np.ndarray = field(default_factory=lambda: np.full(4, np.nan))
@@ -96,11 +101,10 @@ class HierarchicalSegmenter:
         self.expected = [len(c.joints) for c in model.classes]
         self.max_k = max(self.expected) + params.extra_candidates
         self.dark = [c.kind == "dark" for c in model.classes]
-        self.refs = [np.array(c.ref, dtype=np.float64) for c in model.classes]
         self.settings = RefineSettings(
             cluster_sigma=params.cluster_sigma, cluster_iterations=params.cluster_iterations,
             edge_fraction=params.edge_fraction, edge_band=params.edge_band, peak_fraction=params.peak_fraction,
-            min_area=params.min_area,
+            min_area=params.min_area, centre=params.centre,
         )
         self.blobs: list[_Blob] = []
         self.window = {False: params.min_window, True: params.min_window}  # by "is dark class"
@@ -132,7 +136,7 @@ class HierarchicalSegmenter:
                 diam = float(np.sqrt(regions.areas[k] * 4.0 / np.pi))
                 if any(np.linalg.norm(b.pos - pos) < max(b.diameter, diam, 4.0) for b in have):
                     continue
-                blob = _Blob(c, pos.astype(np.float64), mean=self.refs[c].copy(), diameter=diam)
+                blob = _Blob(c, pos.astype(np.float64), diameter=diam)
                 have.append(blob)
                 new.append(blob)
                 room -= 1
@@ -157,24 +161,22 @@ class HierarchicalSegmenter:
             pred = predicted[idx]
             origins = window_origins(pred, size, self.width, self.height)
             classes = [blobs[i].cls for i in idx]
-            means = np.array([blobs[i].mean for i in idx])
-            res = refine_windows(frame, origins, size, pred, classes, means, self.model, self.settings)
+            res = refine_windows(frame, origins, size, pred, classes, self.classifier, self.settings)
             # a region cut by the window border: look again in a window centred on what was found
             again = np.flatnonzero(res.ok & res.touches)
             if again.size:
                 o2 = window_origins(res.centres[again], size, self.width, self.height)
-                r2 = refine_windows(frame, o2, size, res.centres[again], [classes[i] for i in again], res.means[again], self.model, self.settings)
+                r2 = refine_windows(frame, o2, size, res.centres[again], [classes[i] for i in again], self.classifier, self.settings)
                 for j, a in enumerate(again):
                     if r2.ok[j]:
                         res.centres[a], res.boxes[a], res.areas[a] = r2.centres[j], r2.boxes[j], r2.areas[j]
-                        res.diameters[a], res.means[a] = r2.diameters[j], r2.means[j]
+                        res.diameters[a] = r2.diameters[j]
             for j, i in enumerate(idx):
                 if not res.ok[j]:
                     continue
                 b = blobs[i]
                 b.vel = res.centres[j] - b.pos if moving else np.zeros(2)
                 b.pos = res.centres[j].copy()
-                b.mean = res.means[j]
                 b.diameter = float(res.diameters[j])
                 b.area, b.box = float(res.areas[j]), res.boxes[j].copy()
                 ok[i] = True

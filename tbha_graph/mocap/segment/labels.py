@@ -1,9 +1,10 @@
 """Whole-image pixel classification by a colour model, and connected regions per class.
 
 :class:`PixelClassifier` precomputes a 256 x 256 lookup table over the quantised chroma plane
-(:func:`tbha_graph.mocap.color.spaces.quantise`) giving, for every chroma bin, the patch colour whose
-reference lies within its tolerance (nearest one), so classifying a frame is one conversion, one
-quantisation and one table lookup. Pixels darker than ``min_luma`` are never a patch colour; pixels
+(:func:`tbha_graph.mocap.color.spaces.index_planes`) giving, for every chroma bin, the patch colour whose
+region (a wedge from its saturated reference towards the suit's white, see
+:func:`tbha_graph.mocap.color.spaces.wedge_distance_sq`) holds it (the nearest one; none near the white), so classifying a frame is a few integer
+OpenCV operations and one table lookup. Pixels darker than ``min_luma`` are never a patch colour; pixels
 darker than ``dark_max_luma`` that are no patch colour are the head class.
 
 Label images are ``uint8`` ``(h, w)``: 0 = no class, ``c + 1`` = class ``c`` of ``ColorModel.classes``.
@@ -18,7 +19,7 @@ import cv2
 import numpy as np
 
 from ..color.model import ColorModel
-from ..color.spaces import bin_centres, convert, quantise
+from ..color.spaces import index_chroma, index_planes, wedge_distance_sq
 
 
 @dataclass(frozen=True)
@@ -39,35 +40,44 @@ class Regions:
 class PixelClassifier:
     """Classify BGR pixels into the classes of a :class:`ColorModel` (see module docstring)."""
 
+    #: :attr:`wedge_q` holds ``min(254, round(D2_SCALE * d²))`` of the normalised squared wedge distance
+    D2_SCALE = 100.0
+
     def __init__(self, model: ColorModel):
         self.model = model
         self.space = model.space
         self.n_classes = len(model.classes)
         self.head_label = next((i + 1 for i, c in enumerate(model.classes) if c.kind == "dark"), 0)
-        centres = bin_centres(self.space)
-        c1, c2 = np.meshgrid(centres, centres, indexing="ij")  # lut[q1, q2]
+        c1, c2 = index_chroma(self.space)  # chroma at lut[i1, i2]
+        #: chroma (c1, c2) of every table entry, float32 (65536,) each
+        self.c1, self.c2 = c1.astype(np.float32).reshape(-1), c2.astype(np.float32).reshape(-1)
         best = np.full(c1.shape, np.inf)
         lut = np.zeros(c1.shape, dtype=np.uint8)
+        #: per class, the quantised normalised squared distance of every entry to the class's wedge
+        #: (C, 65536) uint8; 255 = never (the dark class, chroma near the suit's white)
+        self.wedge_q = np.full((self.n_classes, c1.size), 255, np.uint8)
+        white = np.hypot(c1 - model.suit_ref[0], c2 - model.suit_ref[1]) < model.suit_tol
+        ref, pale, tol = model.segments()
         for i, cls in enumerate(model.classes):
             if cls.kind != "chroma":
                 continue
-            d = np.hypot(c1 - cls.ref[0], c2 - cls.ref[1])
-            take = (d <= cls.tol) & (d < best)
+            d = wedge_distance_sq(c1, c2, model.suit_ref, ref[i], pale[i], tol[i])
+            take = (d <= 1.0) & (d < best)
             lut[take] = i + 1
             best[take] = d[take]
+            q = np.minimum(np.rint(d * self.D2_SCALE), 254).astype(np.uint8)
+            q[white] = 255
+            self.wedge_q[i] = q.reshape(-1)
+        lut[white] = 0
         self.lut = lut.reshape(-1)
 
     def labels(self, bgr: np.ndarray) -> np.ndarray:
         """Label image ``(h, w)`` uint8 of a BGR uint8 frame ``(h, w, 3)``."""
-        c1, c2, luma = convert(self.space, bgr)
-        q1, q2 = quantise(self.space, c1, c2)
-        idx = q1.astype(np.uint16)
-        idx <<= 8
-        idx |= q2
+        idx, luma3 = index_planes(self.space, bgr)
         lab = self.lut.take(idx)
-        np.copyto(lab, 0, where=luma < np.float32(self.model.min_luma))
+        np.copyto(lab, 0, where=luma3 < 3.0 * self.model.min_luma)
         if self.head_label:
-            np.copyto(lab, self.head_label, where=(luma < np.float32(self.model.dark_max_luma)) & (lab == 0))
+            np.copyto(lab, self.head_label, where=(luma3 < 3.0 * self.model.dark_max_luma) & (lab == 0))
         return lab
 
 

@@ -3,9 +3,10 @@
 For each window (a square of side ``size`` px cut from the full-resolution frame around a predicted
 patch position), two cues are combined:
 
-1. **Adaptive clustering** of the pixels by chroma: starting from the colour's mean and covariance, the
-   pixels within ``cluster_sigma`` Mahalanobis units are collected and the mean and covariance re-estimated
-   from them, ``cluster_iterations`` times. This sees the inside of the patch but leaves holes / notches
+1. **Adaptive clustering** of the pixels by chroma: starting from the pixels the colour model accepts,
+   the cluster's mean and covariance are estimated and the pixels within ``cluster_sigma`` Mahalanobis
+   units collected, ``cluster_iterations`` times (the cluster adapts to the patch's actual colour under
+   the current light). This sees the inside of the patch but leaves holes / notches
    at specular highlights. The connected component nearest the prediction is region A. (For the head's
    dark class the cluster is simply the pixels darker than ``dark_max_luma``.)
 2. **Roberts cross edges** of the grey image (R + G + B) / 3, kept within ``edge_band`` px of region A:
@@ -27,7 +28,8 @@ import cv2
 import numpy as np
 
 from ..color.model import ColorModel
-from ..color.spaces import convert
+from ..color.spaces import index_planes, wedge_distance_sq
+from .labels import PixelClassifier
 
 
 @dataclass(frozen=True)
@@ -40,6 +42,7 @@ class RefineSettings:
     edge_band: int = 2
     peak_fraction: float = 0.3
     min_area: float = 8.0
+    centre: str = "rectangle"
 
 
 @dataclass
@@ -97,71 +100,80 @@ def farthest_peaks(hist: np.ndarray, fraction: float) -> tuple[np.ndarray, np.nd
     return a, b
 
 
-def _chroma_clusters(c1, c2, luma, means, refs, tols, model: ColorModel, s: RefineSettings):
-    """Adaptive clustering on a stack (m, S, S): member mask (m, S, S) bool and the adapted means (m, 2).
+def _chroma_clusters(idx, luma3, classes, clf: PixelClassifier, s: RefineSettings):
+    """Adaptive clustering on a stack of windows: member mask (m, S, S) bool and the cluster means (m, 2).
 
-    Only pixels within 1.5 tolerances of the colour's reference can ever join the cluster (the mean
-    stays within half a tolerance of it and the gate ellipse within one tolerance of the mean), so the
-    iterations run on those pixels alone, with per-window sums by ``np.bincount``.
+    ``idx`` (m, S, S) uint16 chroma table indices and ``luma3`` (m, S, S) 3 x luma of the windows
+    (:func:`~tbha_graph.mocap.color.spaces.index_planes`); ``classes`` (m,) the colour class of each.
+
+    Start: the pixels the colour model accepts (chroma in the colour's wedge, not near the suit's
+    white, luma at least ``min_luma``). Then, ``cluster_iterations`` times: mean and covariance of the
+    cluster, and the new cluster = the pixels within ``cluster_sigma`` Mahalanobis units. The mean is
+    kept inside the half-width wedge and the ellipse bounded, and only pixels within 1.5 times the
+    wedge's width can ever join: the iterations run on those alone (their chroma read from the
+    classifier's tables), with per-window sums by ``np.bincount``.
     """
-    m = len(means)
+    model = clf.model
+    m = len(classes)
+    ref_all, pale_all, tol_all = model.segments()
+    ref, pale, tols = ref_all[classes], pale_all[classes], tol_all[classes]
     g2 = s.cluster_sigma**2
     # variance of one axis of a 2D Gaussian truncated at cluster_sigma, relative to the untruncated one
     e = np.exp(-g2 / 2.0)
     kappa = 1.0 - (g2 / 2.0) * e / (1.0 - e)
-    var_hi = (tols / s.cluster_sigma) ** 2  # (m,): the gate ellipse never exceeds the tolerance circle
-    var_lo = var_hi * 0.02
-    r1 = c1 - refs[:, 0].astype(np.float32)[:, None, None]
-    r2 = c2 - refs[:, 1].astype(np.float32)[:, None, None]
-    reach = ((1.5 * tols) ** 2).astype(np.float32)[:, None, None]
-    cand = (r1 * r1 + r2 * r2 < reach) & (luma >= np.float32(model.min_luma))
-    idx = np.flatnonzero(cand)
+    length = np.linalg.norm(pale - ref, axis=1)
+    var_hi = ((tols + 0.5 * length) / s.cluster_sigma) ** 2  # (m,): along the wedge
+    var_lo = (tols / s.cluster_sigma) ** 2 * 0.02
+    table = idx.astype(np.int64) + (np.asarray(classes, np.int64) * 65536)[:, None, None]
+    q = clf.wedge_q.reshape(-1).take(table)
+    cand = (q < np.uint8(round(1.5**2 * clf.D2_SCALE))) & (luma3 >= 3.0 * model.min_luma)
+    where = np.flatnonzero(cand)
     member = np.zeros(cand.size, bool)
-    mu = means.astype(np.float64).copy()
-    if idx.size == 0:
+    mu = (ref + pale) / 2.0
+    if where.size == 0:
         return member.reshape(cand.shape), mu
-    win = idx // (cand.shape[1] * cand.shape[2])
-    x1 = c1.reshape(-1)[idx].astype(np.float64)
-    x2 = c2.reshape(-1)[idx].astype(np.float64)
+    win = where // (cand.shape[1] * cand.shape[2])
+    ti = idx.reshape(-1)[where]
+    x1 = clf.c1.take(ti).astype(np.float64)
+    x2 = clf.c2.take(ti).astype(np.float64)
+    inl = q.reshape(-1)[where] <= np.uint8(clf.D2_SCALE)  # the colour model's own decision
     cov = np.zeros((m, 2, 2))
-    cov[:, 0, 0] = cov[:, 1, 1] = var_hi
-    inl = np.zeros(idx.size, bool)
-    for _ in range(max(1, s.cluster_iterations)):
-        det = cov[:, 0, 0] * cov[:, 1, 1] - cov[:, 0, 1] ** 2
-        d1 = x1 - mu[win, 0]
-        d2 = x2 - mu[win, 1]
-        m2 = (cov[win, 1, 1] * d1 * d1 - 2.0 * cov[win, 0, 1] * d1 * d2 + cov[win, 0, 0] * d2 * d2) / det[win]
-        inl = m2 < g2
+    default = np.zeros((m, 2, 2))
+    default[:, 0, 0] = default[:, 1, 1] = (tols / s.cluster_sigma) ** 2
+    n_iter = max(1, s.cluster_iterations)
+    for it in range(n_iter + 1):
+        if it > 0:
+            det = cov[:, 0, 0] * cov[:, 1, 1] - cov[:, 0, 1] ** 2
+            d1, d2 = x1 - mu[win, 0], x2 - mu[win, 1]
+            m2 = (cov[win, 1, 1] * d1 * d1 - 2.0 * cov[win, 0, 1] * d1 * d2 + cov[win, 0, 0] * d2 * d2) / det[win]
+            inl = m2 < g2
+        if it == n_iter:
+            break
         w = inl.astype(np.float64)
         n = np.bincount(win, weights=w, minlength=m)
         ok = n >= s.min_area
-        if not ok.any():
-            break
         n1 = np.maximum(n, 1.0)
-        wd1, wd2 = w * d1, w * d2
-        s1 = np.bincount(win, weights=wd1, minlength=m) / n1
-        s2 = np.bincount(win, weights=wd2, minlength=m) / n1
-        s11 = np.bincount(win, weights=wd1 * d1, minlength=m) / n1 - s1 * s1
-        s12 = np.bincount(win, weights=wd1 * d2, minlength=m) / n1 - s1 * s2
-        s22 = np.bincount(win, weights=wd2 * d2, minlength=m) / n1 - s2 * s2
-        new_mu = mu + np.stack([s1, s2], axis=1)
-        # keep the mean within half the tolerance of the colour's reference
-        off = new_mu - refs
-        dist = np.linalg.norm(off, axis=1)
-        lim = 0.5 * tols
-        new_mu = np.where((dist > lim)[:, None], refs + off * (lim / np.maximum(dist, 1e-12))[:, None], new_mu)
-        new_cov = np.stack([np.stack([s11, s12], -1), np.stack([s12, s22], -1)], -2) / kappa
+        wx1, wx2 = w * x1, w * x2
+        s1 = np.bincount(win, weights=wx1, minlength=m) / n1
+        s2 = np.bincount(win, weights=wx2, minlength=m) / n1
+        s11 = np.bincount(win, weights=wx1 * x1, minlength=m) / n1 - s1 * s1
+        s12 = np.bincount(win, weights=wx1 * x2, minlength=m) / n1 - s1 * s2
+        s22 = np.bincount(win, weights=wx2 * x2, minlength=m) / n1 - s2 * s2
+        new_mu = np.stack([s1, s2], axis=1)
+        # keep the mean inside the half-width wedge: pull it towards the nearest point of the axis
+        dd = pale - ref
+        t = np.clip(np.sum((new_mu - ref) * dd, axis=1) / np.maximum(np.sum(dd * dd, axis=1), 1e-12), 0, 1)
+        near = ref + t[:, None] * dd
+        dw = np.sqrt(wedge_distance_sq(new_mu[:, 0], new_mu[:, 1], model.suit_ref, (ref[:, 0], ref[:, 1]), (pale[:, 0], pale[:, 1]), tols))
+        pull = np.where(dw > 0.5, 0.5 / np.maximum(dw, 1e-12), 1.0)[:, None]
+        new_mu = near + (new_mu - near) * pull
+        new_cov = np.stack([np.stack([s11, s12], -1), np.stack([s12, s22], -1)], -2) / (kappa if it > 0 else 1.0)
         evals, evecs = np.linalg.eigh(new_cov)
         evals = np.clip(evals, var_lo[:, None], var_hi[:, None])
         new_cov = np.einsum("mij,mj,mkj->mik", evecs, evals, evecs)
         mu = np.where(ok[:, None], new_mu, mu)
-        cov = np.where(ok[:, None, None], new_cov, cov)
-    # final membership with the adapted statistics
-    det = cov[:, 0, 0] * cov[:, 1, 1] - cov[:, 0, 1] ** 2
-    d1 = x1 - mu[win, 0]
-    d2 = x2 - mu[win, 1]
-    m2 = (cov[win, 1, 1] * d1 * d1 - 2.0 * cov[win, 0, 1] * d1 * d2 + cov[win, 0, 0] * d2 * d2) / det[win]
-    member[idx[m2 < g2]] = True
+        cov = np.where(ok[:, None, None], new_cov, cov if it > 0 else default)
+    member[where[inl]] = True
     return member.reshape(cand.shape), mu
 
 
@@ -186,15 +198,14 @@ def refine_windows(
     size: int,
     predicted: np.ndarray,
     classes: list[int],
-    means: np.ndarray,
-    model: ColorModel,
+    clf: PixelClassifier,
     settings: RefineSettings,
 ) -> WindowResults:
     """Locate one patch per window (see module docstring).
 
     ``frame`` BGR uint8 (h, w, 3); ``origins`` (m, 2) window top-left corners; ``predicted`` (m, 2) px
     expected patch centres (the region nearest to it is chosen); ``classes`` (m,) class index into
-    ``model.classes``; ``means`` (m, 2) the chroma mean to start clustering from (ignored for the dark class).
+    the colour model's classes; ``clf`` the colour model's :class:`~.labels.PixelClassifier`.
 
     The windows are processed as one tall image (windows stacked vertically, separated by empty rows
     wider than the edge band) so each OpenCV operation runs once per call, not once per window.
@@ -202,26 +213,26 @@ def refine_windows(
     m = len(origins)
     out = WindowResults(
         ok=np.zeros(m, bool), centres=np.full((m, 2), np.nan), areas=np.zeros(m), boxes=np.full((m, 4), np.nan),
-        diameters=np.zeros(m), means=np.array(means, dtype=np.float64).reshape(m, 2), touches=np.zeros(m, bool),
+        diameters=np.zeros(m), means=np.full((m, 2), np.nan), touches=np.zeros(m, bool),
     )
     if m == 0:
         return out
+    model = clf.model
     S = int(size)
     stack = cut_windows(frame, origins, S)
-    c1, c2, luma = convert(model.space, stack)
+    idx, luma3 = index_planes(model.space, stack.reshape(m * S, S, 3))
+    idx, luma3 = idx.reshape(m, S, S), luma3.reshape(m, S, S)
     kinds = np.array([model.classes[c].kind == "chroma" for c in classes])
     H = S + settings.edge_band + 1  # rows per window in the tall image
     member = np.zeros((m, H, S), np.uint8)
     if kinds.any():
         ci = np.flatnonzero(kinds)
-        refs = np.array([model.classes[classes[i]].ref for i in ci], dtype=np.float64)
-        tols = np.array([model.classes[classes[i]].tol for i in ci], dtype=np.float64)
-        mem, mu = _chroma_clusters(c1[ci], c2[ci], luma[ci], out.means[ci], refs, tols, model, settings)
+        mem, mu = _chroma_clusters(idx[ci], luma3[ci], np.asarray(classes)[ci], clf, settings)
         member[ci, :S] = mem
         out.means[ci] = mu
     if (~kinds).any():
         di = np.flatnonzero(~kinds)
-        member[di, :S] = luma[di] < np.float32(model.dark_max_luma)
+        member[di, :S] = luma3[di] < 3.0 * model.dark_max_luma
 
     # region A: per window, the clustered region nearest the prediction (among the larger ones), traced
     # by its outer contour and filled (so highlight holes inside the patch do not matter)
@@ -255,7 +266,8 @@ def refine_windows(
     k = 2 * settings.edge_band + 1
     band = cv2.dilate(region, np.ones((k, k), np.uint8)).reshape(m, H, S) > 0
     mag = np.zeros((m, H, S), np.float32)
-    mag[:, :S] = _roberts(luma if model.space == "rg" else _grey(stack))
+    grey = luma3.astype(np.float32) * np.float32(1.0 / 3.0) if model.space == "rg" else _grey(stack)
+    mag[:, :S] = _roberts(grey)
     peak = np.where(band, mag, 0).reshape(m, -1).max(axis=1)
     thr = np.where(peak > 0, settings.edge_fraction * peak, np.inf).astype(np.float32)
     union = (region.reshape(m, H, S) > 0) | ((mag > thr[:, None, None]) & band)
@@ -280,6 +292,11 @@ def refine_windows(
     ox, oy = origins[wins, 0], origins[wins, 1]
     out.ok[wins] = True
     out.centres[wins] = np.stack([(x0 + x1) / 2.0 + ox, (y0 + y1) / 2.0 + oy], axis=1)
+    if settings.centre == "centroid":  # alternative: centroid of the filled outer boundary
+        for w in wins:
+            mo = cv2.moments(best[w])
+            if mo["m00"] > 0:
+                out.centres[w] = (mo["m10"] / mo["m00"] + origins[w, 0], mo["m01"] / mo["m00"] - w * H + origins[w, 1])
     out.boxes[wins] = np.stack([x0 + ox, y0 + oy, x1 + ox, y1 + oy], axis=1)
     out.areas[wins] = union.reshape(m, -1).sum(axis=1)[wins]
     out.diameters[wins] = np.maximum(x1 - x0, y1 - y0) + 1.0
