@@ -218,3 +218,68 @@ def test_keypoints_pipeline_runs_end_to_end(tmp_path):
     assert metrics["mpjpe_mm"] < 160
     assert metrics["error_2d_px_median"] < 2.5
     assert run.output("joints3d.npz")["joints"].shape == (120, 16, 3)
+
+
+def test_openpose_joint_never_found_is_refused_and_low_confidence_joint_is_kept(take, tmp_path):
+    folder = tmp_path / "op"
+    shutil.copytree(take["openpose"], folder)
+    i = OPENPOSE_BODY25.index("RKnee")
+    for f in sorted(folder.glob("*.json")):
+        doc = json.loads(f.read_text())
+        kp = doc["people"][0]["pose_keypoints_2d"]
+        kp[3 * i + 2] = 0.2  # seen, but never above the threshold: kept at its (noisy) positions
+        f.write_text(json.dumps(doc))
+    t = run_node(openpose_keypoints, {"path": folder, **SIZE})["tracks"]
+    rk = JOINT_INDEX["right_knee"]
+    assert not t["tracked"][:, rk].any()
+    assert np.median(np.linalg.norm(t["points"][:, rk] - take["gt"]["joints2d"][:, rk], axis=-1)) < 3.0
+    for f in sorted(folder.glob("*.json")):
+        doc = json.loads(f.read_text())
+        doc["people"][0]["pose_keypoints_2d"][3 * i: 3 * i + 3] = [0, 0, 0]
+        f.write_text(json.dumps(doc))
+    with pytest.raises(NodeError, match=r"never found joint 'right_knee'"):
+        run_node(openpose_keypoints, {"path": folder, **SIZE})
+
+
+# --- live detector (optional mediapipe) --------------------------------------------------------------------
+def test_mediapipe_pose_refuses_downloading_models_and_explains_a_missing_install(monkeypatch, tmp_path):
+    import sys
+
+    from tbha_graph.mocap.detect.mediapipe_pose import load_mediapipe_pose, mediapipe_pose
+
+    with pytest.raises(Exception, match="only 1 ships with mediapipe 0.10.21"):
+        mediapipe_pose.params.model_validate({"model_complexity": 2})
+    monkeypatch.setitem(sys.modules, "mediapipe", None)  # import fails as if not installed
+    with pytest.raises(NodeError, match=r"pip install --no-deps mediapipe==0\.10\.21"):
+        load_mediapipe_pose()
+
+
+def test_mediapipe_pose_on_a_photo(tmp_path):
+    pytest.importorskip("mediapipe")
+    import cv2
+    import matplotlib
+
+    from tbha_graph.mocap.detect.mediapipe_pose import mediapipe_pose
+    from tbha_graph.mocap.io.video import probe_video
+
+    img = cv2.imread(str(Path(matplotlib.get_data_path()) / "sample_data" / "grace_hopper.jpg"))
+    h, w = img.shape[:2]
+    path = tmp_path / "still.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (w, h))
+    for _ in range(3):
+        writer.write(img)
+    writer.release()
+    out = run_node(mediapipe_pose, {}, video=probe_video(path))
+    t, m = out["tracks"], out["motion"]
+    assert t["points"].shape == (3, 16, 2) and int(t["width"]) == w
+    head, neck = JOINT_INDEX["head"], JOINT_INDEX["neck"]
+    ls, rs = JOINT_INDEX["left_shoulder"], JOINT_INDEX["right_shoulder"]
+    # a portrait: shoulders seen, the person's left shoulder on the image right, the head above them
+    assert t["tracked"][:, [ls, rs]].all()
+    assert (t["points"][:, ls, 0] > t["points"][:, rs, 0] + 0.2 * w).all()
+    assert (t["points"][:, head, 1] < t["points"][:, [ls, rs], 1].min(axis=1) - 0.1 * h).all()
+    # the hips are below the frame: untracked (so are the spine joints placed from them), with
+    # MediaPipe's off-image guess below the picture
+    assert not t["tracked"][:, [JOINT_INDEX["left_hip"], JOINT_INDEX["hips"], neck]].any()
+    assert (t["points"][:, JOINT_INDEX["left_hip"], 1] > h).all()
+    assert (m["joints"][:, head, 1] > m["joints"][:, JOINT_INDEX["hips"], 1]).all()  # y up

@@ -180,15 +180,18 @@ def joints16_from_landmarks(
     return out, out_c
 
 
-def fill_untracked(points: np.ndarray, tracked: np.ndarray) -> np.ndarray:
+def fill_untracked(points: np.ndarray, tracked: np.ndarray, seen: np.ndarray | None = None) -> np.ndarray:
     """Points ``(n, J, D)`` with every untracked entry replaced by linear interpolation in time between the
-    nearest tracked frames of the same joint (held constant before the first / after the last). Joints
-    never tracked keep their values. Returns a new array."""
+    nearest tracked frames of the same joint (held constant before the first / after the last). A joint
+    never tracked is interpolated between the frames where it was ``seen`` at all (``(n, J)`` bool, e.g.
+    confidence > 0), when given; a joint never seen keeps its values. Returns a new array."""
     pts = np.array(points, dtype=np.float64, copy=True)
     n = pts.shape[0]
     t = np.arange(n)
     for j in range(pts.shape[1]):
         ok = tracked[:, j] & np.isfinite(pts[:, j]).all(axis=-1)
+        if not ok.any() and seen is not None:
+            ok = seen[:, j] & np.isfinite(pts[:, j]).all(axis=-1)
         if ok.all() or not ok.any():
             continue
         for d in range(pts.shape[2]):

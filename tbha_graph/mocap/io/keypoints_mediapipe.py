@@ -34,7 +34,8 @@ since every later frame would be mistimed.
 
 Output ``tracks`` (TRACKS2D): the 16 joints in pixels (mapping: :mod:`~tbha_graph.mocap.io.keypoint_layouts`),
 ``tracked`` = confidence >= ``threshold``, ``confidence``; untracked points hold a prediction (linear
-interpolation between the nearest tracked frames of the joint). Output ``motion`` (MOTION, ``io.mediapipe_world``):
+interpolation between the nearest tracked frames of the joint; a joint never visible, e.g. the legs in a
+portrait, keeps the detector's own off-image guesses). Output ``motion`` (MOTION, ``io.mediapipe_world``):
 world landmarks turned to the project's world frame (y up, the actor facing +z when facing the camera):
 ``(x, y, z)_world = (x, -y, -z)_mediapipe``, plus ``root_height`` metres so the hips are not at the floor.
 The heading is the camera's (MediaPipe gives no ground plane): a tilted camera tilts the motion.
@@ -297,12 +298,10 @@ def tracks_from_mediapipe(take: MediaPipeTake, fps: float, width: int, height: i
     px = np.where(detected[:, None, None], px, 0.0)
     pts, conf = joints16_from_landmarks(px, vis, MEDIAPIPE_POSE, fractions, threshold)
     tracked = conf >= threshold
-    if not tracked.any(axis=0).all():
-        j = int(np.flatnonzero(~tracked.any(axis=0))[0])
-        raise NodeError(f"{where}: joint {JOINT_NAMES[j]!r} is never seen with visibility >= {threshold}",
-                        hint="lower 'threshold' or check the detector output")
+    # MediaPipe places every landmark, off-image ones too: a joint never visible keeps the detector's guess
     return {
-        "points": fill_untracked(pts, tracked), "tracked": tracked, "confidence": conf,
+        "points": fill_untracked(pts, tracked, np.repeat(detected[:, None], pts.shape[1], axis=1)),
+        "tracked": tracked, "confidence": conf,
         "fps": np.array(fps), "width": np.array(width), "height": np.array(height), "joint_names": np.array(JOINT_NAMES),
     }
 
@@ -338,7 +337,7 @@ def motion_from_mediapipe(take: MediaPipeTake, fps: float, threshold: float = 0.
     vis = np.where(detected[:, None], w[..., 3], 0.0)
     joints, conf = joints16_from_landmarks(xyz, vis, MEDIAPIPE_POSE, fractions, threshold)
     tracked = conf >= threshold
-    joints = fill_untracked(joints, tracked)
+    joints = fill_untracked(joints, tracked, np.repeat(detected[:, None], joints.shape[1], axis=1))
     joints[..., 1] += root_height
     return {"joints": joints, "fps": np.array(fps), "tracked": tracked, "joint_names": np.array(JOINT_NAMES)}
 

@@ -17,7 +17,8 @@ largest box around its confident parts) or an index into ``people``.
 
 OpenPose files carry neither the frame rate nor the image size: they are params (``fps``, ``width``,
 ``height``). Output ``tracks`` (TRACKS2D): 16 joints in pixels, ``tracked`` = confidence >= ``threshold``,
-``confidence``; untracked points hold a linear interpolation between the joint's nearest tracked frames.
+``confidence``; untracked points hold a linear interpolation between the joint's nearest tracked frames
+(a joint never above the threshold: between the frames where OpenPose found it at all; never found: error).
 """
 from __future__ import annotations
 
@@ -172,12 +173,13 @@ def tracks_from_openpose(kp: np.ndarray, layout: Layout, fps: float, width: int,
     conf[missing] = 0.0
     pts, c16 = joints16_from_landmarks(xy, conf, layout, fractions, threshold)
     tracked = c16 >= threshold
-    if not tracked.any(axis=0).all():
-        j = int(np.flatnonzero(~tracked.any(axis=0))[0])
-        raise NodeError(f"{where}: joint {JOINT_NAMES[j]!r} is never seen with confidence >= {threshold}",
-                        hint="lower 'threshold' or check the OpenPose output")
+    seen = c16 > 0
+    if not seen.any(axis=0).all():
+        j = int(np.flatnonzero(~seen.any(axis=0))[0])
+        raise NodeError(f"{where}: OpenPose never found joint {JOINT_NAMES[j]!r} (confidence 0 in every frame), so "
+                        "there is no position to give it", hint="film the whole body, or check the OpenPose output")
     return {
-        "points": fill_untracked(pts, tracked), "tracked": tracked, "confidence": c16,
+        "points": fill_untracked(pts, tracked, seen), "tracked": tracked, "confidence": c16,
         "fps": np.array(float(fps)), "width": np.array(int(width)), "height": np.array(int(height)),
         "joint_names": np.array(JOINT_NAMES), "layout": np.array(layout.name),
     }
