@@ -150,3 +150,14 @@ def test_bad_colour_model_input(tmp_path):
         run_node(hierarchical, video=clip, colors={"space": "xyz"})
     with pytest.raises(Exception):
         run_node(hierarchical, video=clip, colors={}, params={"search_scale": 0})
+
+
+def test_threshold_at_half_resolution(tmp_path, model):
+    clip, truth = _moving_clip(tmp_path, n=3)
+    det = run_node(chroma_threshold, video=clip, colors=model, params={"scale": 0.5})["detections"]
+    assert _errors(model, det["centres"], truth).max() < 1.5
+
+
+def test_window_params_checked():
+    with pytest.raises(Exception, match="min_window"):
+        HierarchicalParams(min_window=200, max_window=100)

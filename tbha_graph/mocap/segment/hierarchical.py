@@ -16,8 +16,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
+import cv2
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from ...core.node import node
 from ...core.types import Json
@@ -73,9 +74,17 @@ class HierarchicalParams(BaseModel):
         json_schema_extra={"unit": "frame"},
     )
 
+    @model_validator(mode="after")
+    def _windows(self) -> "HierarchicalParams":
+        if self.min_window > self.max_window:
+            raise ValueError(f"min_window ({self.min_window}) must not exceed max_window ({self.max_window})")
+        return self
+
 
 @dataclass
 class _Blob:
+    """A patch region being followed: its class, position and velocity (px, px/frame), size (px)."""
+
     cls: int
     pos: np.ndarray  # (2,) px
     vel: np.ndarray = field(default_factory=lambda: np.zeros(2))
@@ -115,8 +124,6 @@ class HierarchicalSegmenter:
     def _search(self, frame: np.ndarray, classes: list[int]) -> list[_Blob]:
         s = self.p.search_scale
         if s < 1.0:
-            import cv2
-
             small = cv2.resize(frame, (max(1, round(self.width * s)), max(1, round(self.height * s))), interpolation=cv2.INTER_AREA)
             factor = self.width / small.shape[1]
         else:
