@@ -213,9 +213,9 @@ def test_keypoints_pipeline_runs_end_to_end(tmp_path):
     metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
     assert (tmp_path / "run" / "motion.bvh").stat().st_size > 1000
     assert metrics["frames"] == 120
-    # single camera, detector noise: measured 119 mm; a broken front end (swapped sides, pixels off by
-    # the torso fractions) or a broken chain gives several hundred
-    assert metrics["mpjpe_mm"] < 160
+    # single camera, detector noise: measured 102 mm (119 before smoothing); left and right swapped in the
+    # front end gives 245 mm. Misplaced spine joints hardly change the 3D figure but show in the 2D error.
+    assert metrics["mpjpe_mm"] < 140 and metrics["raw_mpjpe_mm"] < 160
     assert metrics["error_2d_px_median"] < 2.5
     assert run.output("joints3d.npz")["joints"].shape == (120, 16, 3)
 
