@@ -71,13 +71,13 @@ def test_text_file_named_mp4_names_the_file(tmp_path):
         run_node(video, {"path": str(path)})
 
 
-def test_zero_frame_video_names_the_file(tmp_path):
-    path = tmp_path / "empty.mp4"
-    wr = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), 30.0, (W, H))
-    wr.release()  # no frames written
-    if not path.exists():
-        path.write_bytes(b"")
-    with pytest.raises(NodeError, match="empty.mp4"):
+@pytest.mark.parametrize("name, fourcc, message", [("empty.mp4", "mp4v", "cannot open"), ("empty.avi", "MJPG", "has no frames")])
+def test_zero_frame_video_names_the_file(tmp_path, name, fourcc, message):
+    path = tmp_path / name
+    wr = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*fourcc), 30.0, (W, H))
+    wr.release()  # no frames written (an mp4 is then unreadable, an AVI readable but empty)
+    assert path.exists()
+    with pytest.raises(NodeError, match=rf"{name}.*{message}"):
         run_node(video, {"path": str(path)})
 
 

@@ -56,7 +56,10 @@ def _open(path: Path) -> cv2.VideoCapture:
     cap = cv2.VideoCapture(str(path))
     if not cap.isOpened():
         cap.release()
-        raise NodeError(f"video {path}: OpenCV cannot open it (not a video, or an unsupported codec)", hint=_OPEN_HINT)
+        raise NodeError(
+            f"video {path}: OpenCV cannot open it (not a video, an unsupported codec, or an empty or unfinished file)",
+            hint=_OPEN_HINT,
+        )
     return cap
 
 

@@ -6,9 +6,10 @@ patch position), two cues are combined:
 1. **Adaptive clustering** of the pixels by chroma: starting from the pixels the colour model accepts,
    the cluster's mean and covariance are estimated and the pixels within ``cluster_sigma`` Mahalanobis
    units collected, ``cluster_iterations`` times (the cluster adapts to the patch's actual colour under
-   the current light). This sees the inside of the patch but leaves holes / notches
-   at specular highlights. The connected component nearest the prediction is region A. (For the head's
-   dark class the cluster is simply the pixels darker than ``dark_max_luma``.)
+   the current light). This sees the inside of the patch but leaves holes / notches at specular
+   highlights. Region A: the cluster's region nearest the prediction (among the larger ones), traced by
+   its outer contour and filled. (For the head's dark class the cluster is simply the pixels darker
+   than ``dark_max_luma``.)
 2. **Roberts cross edges** of the grey image (R + G + B) / 3, kept within ``edge_band`` px of region A:
    the patch's boundary including the blurred band between patch and suit, which clustering misses.
    Region B. (Grey, not the space's own luma: HSV's V hardly separates a saturated patch from white.)
@@ -17,8 +18,9 @@ The union A ∪ B is taken, its outer boundary traced (``cv2.findContours``), an
 boundary points' x and y coordinates computed; the two farthest-apart histogram peaks in each give the
 patch's bounding rectangle, whose centre is the joint's 2D position.
 
-The colour statistics of all windows are computed at once on a ``(m, size, size)`` stack; only the
-region selection and contour tracing loop over windows. Coordinates are pixels from the frame's top-left.
+All windows are processed at once: the colour statistics on a ``(m, size, size)`` stack, the OpenCV
+steps on one tall image of the windows stacked vertically; only the choice of each window's region
+loops in Python. Coordinates are pixels from the frame's top-left.
 """
 from __future__ import annotations
 
@@ -27,7 +29,6 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..color.model import ColorModel
 from ..color.spaces import index_planes, wedge_distance_sq
 from .labels import PixelClassifier
 
