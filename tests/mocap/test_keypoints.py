@@ -12,12 +12,12 @@ import pytest
 from tbha_graph.core.errors import NodeError
 from tbha_graph.core.testing import run_node
 from tbha_graph.mocap.io.keypoint_layouts import (
-    MEDIAPIPE_POSE, OPENPOSE_BODY25, OPENPOSE_COCO18, fill_untracked, joints16_from_landmarks,
+    MEDIAPIPE_POSE, OPENPOSE_BODY25, fill_untracked, joints16_from_landmarks,
 )
 from tbha_graph.mocap.io.keypoints_mediapipe import MEDIAPIPE_TO_WORLD, mediapipe_keypoints, mediapipe_world
 from tbha_graph.mocap.io.keypoints_openpose import openpose_keypoints
 from tbha_graph.mocap.io.keypoints_synth import SynthOptions, anatomical_points, synthesize_keypoints
-from tbha_graph.mocap.skeleton import JOINT_INDEX, JOINT_NAMES, measure_bone_lengths
+from tbha_graph.mocap.skeleton import JOINT_INDEX, measure_bone_lengths
 
 ROOT = Path(__file__).resolve().parents[2]
 CLIP = ROOT / "data" / "mocap" / "cmu" / "131_03.bvh"
