@@ -82,7 +82,9 @@ def farthest_peaks(hist: np.ndarray, fraction: float) -> tuple[np.ndarray, np.nd
     sub-pixel by the count-weighted mean of its bin and its two neighbours. Returns the low and high
     peak positions (m,) in bin units; NaN for empty rows.
     """
-    h = np.pad(np.asarray(hist, dtype=np.float64), ((0, 0), (1, 1)))
+    hist = np.asarray(hist, dtype=np.float64)
+    h = np.zeros((hist.shape[0], hist.shape[1] + 2))
+    h[:, 1:-1] = hist
     mid = h[:, 1:-1]
     top = mid.max(axis=1, keepdims=True)
     peak = (mid >= h[:, :-2]) & (mid >= h[:, 2:]) & (mid >= fraction * top) & (mid > 0)
@@ -90,12 +92,10 @@ def farthest_peaks(hist: np.ndarray, fraction: float) -> tuple[np.ndarray, np.nd
     first = np.argmax(peak, axis=1) + 1  # index into the padded rows
     last = h.shape[1] - 2 - np.argmax(peak[:, ::-1], axis=1)
 
-    def sub(i: np.ndarray) -> np.ndarray:
-        lo, c, hi = h[rows, i - 1], h[rows, i], h[rows, i + 1]
-        return (i - 1) + (hi - lo) / np.maximum(lo + c + hi, 1e-12)
-
+    idx = np.stack([first, last])  # (2, m)
+    lo, c, hi = h[rows, idx - 1], h[rows, idx], h[rows, idx + 1]
+    a, b = (idx - 1) + (hi - lo) / np.maximum(lo + c + hi, 1e-12)
     empty = top[:, 0] <= 0
-    a, b = sub(first), sub(last)
     a[empty] = np.nan
     b[empty] = np.nan
     return a, b
@@ -112,7 +112,7 @@ def _chroma_clusters(idx, luma3, classes, clf: PixelClassifier, s: RefineSetting
     cluster, and the new cluster = the pixels within ``cluster_sigma`` Mahalanobis units. The mean is
     kept inside the half-width wedge and the ellipse bounded, and only pixels within 1.5 times the
     wedge's width can ever join: the iterations run on those alone (their chroma read from the
-    classifier's tables), with per-window sums by ``np.bincount``.
+    classifier's tables), with per-window sums by ``np.add.reduceat``.
     """
     model = clf.model
     m = len(classes)
@@ -138,6 +138,9 @@ def _chroma_clusters(idx, luma3, classes, clf: PixelClassifier, s: RefineSetting
     x1 = clf.c1.take(ti).astype(np.float64)
     x2 = clf.c2.take(ti).astype(np.float64)
     inl = q.reshape(-1)[where] <= np.uint8(clf.D2_SCALE)  # the colour model's own decision
+    feats = np.stack([np.ones_like(x1), x1, x2, x1 * x1, x1 * x2, x2 * x2], axis=1)
+    starts = np.searchsorted(win, np.arange(m))
+    has = np.bincount(win, minlength=m) > 0
     cov = np.zeros((m, 2, 2))
     default = np.zeros((m, 2, 2))
     default[:, 0, 0] = default[:, 1, 1] = (tols / s.cluster_sigma) ** 2
@@ -150,16 +153,16 @@ def _chroma_clusters(idx, luma3, classes, clf: PixelClassifier, s: RefineSetting
             inl = m2 < g2
         if it == n_iter:
             break
-        w = inl.astype(np.float64)
-        n = np.bincount(win, weights=w, minlength=m)
+        # per-window sums of 1, x1, x2, x1², x1 x2, x2² over the cluster (``win`` is sorted)
+        sums = np.zeros((m, 6))
+        sums[has] = np.add.reduceat(feats * inl[:, None], starts[has], axis=0)
+        n = sums[:, 0]
         ok = n >= s.min_area
         n1 = np.maximum(n, 1.0)
-        wx1, wx2 = w * x1, w * x2
-        s1 = np.bincount(win, weights=wx1, minlength=m) / n1
-        s2 = np.bincount(win, weights=wx2, minlength=m) / n1
-        s11 = np.bincount(win, weights=wx1 * x1, minlength=m) / n1 - s1 * s1
-        s12 = np.bincount(win, weights=wx1 * x2, minlength=m) / n1 - s1 * s2
-        s22 = np.bincount(win, weights=wx2 * x2, minlength=m) / n1 - s2 * s2
+        s1, s2 = sums[:, 1] / n1, sums[:, 2] / n1
+        s11 = sums[:, 3] / n1 - s1 * s1
+        s12 = sums[:, 4] / n1 - s1 * s2
+        s22 = sums[:, 5] / n1 - s2 * s2
         new_mu = np.stack([s1, s2], axis=1)
         # keep the mean inside the half-width wedge: pull it towards the nearest point of the axis
         dd = pale - ref
@@ -288,8 +291,9 @@ def refine_windows(
     wid = np.repeat(wins, [len(best[w]) for w in wins])
     hx = np.bincount(wid * S + pts[:, 0], minlength=m * S).reshape(m, S)[wins]
     hy = np.bincount(wid * S + (pts[:, 1] - wid * H), minlength=m * S).reshape(m, S)[wins]
-    x0, x1 = farthest_peaks(hx, settings.peak_fraction)
-    y0, y1 = farthest_peaks(hy, settings.peak_fraction)
+    lo, hi = farthest_peaks(np.concatenate([hx, hy]), settings.peak_fraction)
+    x0, y0 = np.split(lo, 2)
+    x1, y1 = np.split(hi, 2)
     ox, oy = origins[wins, 0], origins[wins, 1]
     out.ok[wins] = True
     out.centres[wins] = np.stack([(x0 + x1) / 2.0 + ox, (y0 + y1) / 2.0 + oy], axis=1)
