@@ -79,7 +79,10 @@ def _resolve_paths(spec: NodeSpec, raw: dict[str, Value]) -> dict[str, Any]:
         value = v.value
         if fld is not None and value is not None and isinstance(value, str) and is_input_path_field(fld.annotation, fld.metadata):
             p = Path(value).expanduser()
-            value = str(p if p.is_absolute() else (v.base_dir / p).resolve())
+            try:
+                value = str(p if p.is_absolute() else (v.base_dir / p).resolve())
+            except (OSError, ValueError):  # e.g. a NUL character: left as written, reported as a missing file
+                value = str(v.base_dir / p)
         out[k] = value
     return out
 

@@ -136,7 +136,10 @@ def _read_file(path: Path, errors: list[PipelineError], chain: tuple[Path, ...])
     if "extends" in data:
         parent = Path(str(data["extends"]))
         parent = parent if parent.is_absolute() else (base_dir / parent)
-        parent = parent.resolve()
+        try:
+            parent = parent.resolve()
+        except (OSError, ValueError):  # e.g. a NUL character in the name
+            parent = Path(str(parent).replace("\0", "\\0"))
         if parent in chain:
             errors.append(PipelineError(f"'extends' forms a cycle: {' -> '.join(str(p) for p in chain + (parent,))}", location=data.loc_of("extends")))
         elif not parent.is_file():
@@ -171,6 +174,9 @@ def read_pipeline(path: str | Path) -> PipelineDecl:
         raise PipelineErrors([PipelineError(f"pipeline file not found: {path}", hint="check the path; pipelines/ holds the bundled ones")])
     decl = _read_file(path.resolve(), errors, (path.resolve(),))
     decl.path = str(path)
+    if not errors and not decl.nodes:  # an empty or truncated file must not "run" successfully doing nothing
+        errors.append(PipelineError("the pipeline has no nodes", location=Location(str(path.resolve()), 1),
+                                    hint="a pipeline file needs a 'nodes:' section (or 'extends:' a file that has one)"))
     if errors:
         raise PipelineErrors(errors)
     return decl

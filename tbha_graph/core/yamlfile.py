@@ -36,6 +36,9 @@ def _make_loader(filename: str, errors: list[PipelineError]) -> type[yaml.SafeLo
         for key_node, value_node in node.value:
             key = loader.construct_object(key_node, deep=True)
             loc = Location(filename, key_node.start_mark.line + 1, key_node.start_mark.column + 1)
+            if isinstance(key, (dict, list)):  # '? [a, b]' or '? {a: 1}': valid YAML, unhashable in Python
+                errors.append(PipelineError(f"a key must be a name, not a {'mapping' if isinstance(key, dict) else 'list'}", location=loc))
+                continue
             if key in out:
                 errors.append(
                     PipelineError(
@@ -63,7 +66,11 @@ def load_yaml(path: str | Path, text: str | None = None) -> tuple[Any, list[Pipe
             text = path.read_text(encoding="utf-8")
         except FileNotFoundError:
             return None, [PipelineError(f"file not found: {path}", hint="check the path (relative paths start from the current folder)")]
-        except (OSError, UnicodeDecodeError) as e:
+        except UnicodeDecodeError as e:
+            line = path.read_bytes()[: e.start].count(b"\n") + 1
+            return None, [PipelineError(f"not UTF-8 text: byte {e.object[e.start]:#04x} cannot be decoded", location=Location(str(path), line),
+                                        hint="save the file as UTF-8")]
+        except OSError as e:
             return None, [PipelineError(f"cannot read {path}: {e}")]
     try:
         data = yaml.load(text, Loader=_make_loader(str(path), errors))  # noqa: S506 - SafeLoader subclass
@@ -76,6 +83,9 @@ def load_yaml(path: str | Path, text: str | None = None) -> tuple[Any, list[Pipe
             if 0 <= mark.line < len(lines):
                 snippet = f"\n    {lines[mark.line]}\n    {' ' * mark.column}^"
         return None, [PipelineError(f"YAML syntax error: {e.problem or e}{snippet}", location=loc)]
+    except yaml.reader.ReaderError as e:  # a control character: no mark, only a character position
+        line = text.count("\n", 0, e.position) + 1
+        return None, [PipelineError(f"YAML error: character {e.character!r} is not allowed in a YAML file", location=Location(str(path), line))]
     except yaml.YAMLError as e:
         return None, [PipelineError(f"YAML error: {e}", location=Location(str(path)))]
     return data, errors

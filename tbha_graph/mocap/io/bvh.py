@@ -120,6 +120,8 @@ class Bvh:
 # reading
 # ---------------------------------------------------------------------------------------------
 _LINE_BREAK = re.compile(r"\r\n|\r|\n")
+#: a plain decimal number as BVH writers print it (float() alone also takes '1_0', 'infinity', '١')
+_DECIMAL = re.compile(r"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?")
 
 
 class _Tokens:
@@ -154,10 +156,9 @@ class _Tokens:
 
     def number(self, what: str) -> float:
         tok, line = self.next(what)
-        try:
-            value = float(tok)
-        except ValueError:
-            raise self.error(f"expected {what} (a number), found '{tok}'", line) from None
+        if not _DECIMAL.fullmatch(tok):
+            raise self.error(f"expected {what} (a number), found '{tok}'", line)
+        value = float(tok)
         if not np.isfinite(value):
             raise self.error(f"expected {what} (a finite number), found '{tok}'", line)
         return value
@@ -173,7 +174,7 @@ def _parse_joint(t: _Tokens, name: str, parent: int, joints: list[BvhJoint]) -> 
     offset = t.vec3("OFFSET")
     t.expect("CHANNELS", where)
     n_tok, n_line = t.next("the channel count")
-    if not n_tok.isdigit():
+    if not (n_tok.isascii() and n_tok.isdigit()):
         raise t.error(f"expected the channel count after CHANNELS, found '{n_tok}'", n_line)
     chans = []
     for _ in range(int(n_tok)):
@@ -301,15 +302,12 @@ def read_bvh(path: str | Path) -> Bvh:
             values["time" if values else "frames"] = (m.group(2), k + 1)
         k += 1
     frames_s, frames_line = values["frames"]
-    if not frames_s.isdigit():
+    if not (frames_s.isascii() and frames_s.isdigit()):
         raise BvhError(f"expected a whole number of frames after 'Frames:', found '{frames_s}'",
                        location=Location(file, frames_line))
     n_frames = int(frames_s)
     time_s, time_line = values["time"]
-    try:
-        frame_time = float(time_s)
-    except ValueError:
-        frame_time = float("nan")
+    frame_time = float(time_s) if _DECIMAL.fullmatch(time_s) else float("nan")
     if not (np.isfinite(frame_time) and frame_time > 0):
         raise BvhError(f"expected a positive number of seconds after 'Frame Time:', found '{time_s}'",
                        location=Location(file, time_line))
@@ -348,6 +346,14 @@ def read_bvh(path: str | Path) -> Bvh:
 # ---------------------------------------------------------------------------------------------
 # writing
 # ---------------------------------------------------------------------------------------------
+def _rounded(a: np.ndarray, p: int) -> np.ndarray:
+    """``a`` rounded to ``p`` decimals, + 0.0 so no "-0.000" is printed. np.round overflows to inf
+    for |x| > ~1e308 / 10**p, so values beyond 1e15 (already whole at float64 precision) are kept."""
+    a = np.asarray(a, dtype=np.float64)
+    small = np.abs(a) < 1e15
+    return np.where(small, np.round(np.where(small, a, 0.0), p), a) + 0.0
+
+
 def write_bvh(path: str | Path, bvh: Bvh, precision: int = 6) -> Path:
     """Write ``bvh`` to ``path`` atomically (temp file + rename), LF line endings, tab indentation.
 
@@ -363,7 +369,7 @@ def write_bvh(path: str | Path, bvh: Bvh, precision: int = 6) -> Path:
     out: list[str] = ["HIERARCHY"]
 
     def vec(v: np.ndarray) -> str:
-        return " ".join(f"{float(x):.{p}f}" for x in np.round(v, p) + 0.0)  # + 0.0: no "-0.000"
+        return " ".join(f"{float(x):.{p}f}" for x in _rounded(v, p))
 
     def emit(i: int, depth: int) -> None:
         j = bvh.joints[i]
@@ -386,8 +392,8 @@ def write_bvh(path: str | Path, bvh: Bvh, precision: int = 6) -> Path:
         raise ValueError("motion holds NaN or infinite values")
     out += ["MOTION", f"Frames: {motion.shape[0]}", f"Frame Time: {float(bvh.frame_time)!r}"]
     row = " ".join([f"%.{p}f"] * motion.shape[1])
-    out.extend(row % tuple(r) for r in (np.round(motion, p) + 0.0).tolist())
-    atomic_write_bytes(path, ("\n".join(out) + "\n").encode("ascii"))
+    out.extend(row % tuple(r) for r in _rounded(motion, p).tolist())
+    atomic_write_bytes(path, ("\n".join(out) + "\n").encode("utf-8"))  # joint names may be non-ASCII
     return path
 
 
