@@ -18,7 +18,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import yaml
 from pydantic import BaseModel, Field, field_validator, model_validator
 
 from .skeleton import PATCHED_JOINTS
@@ -88,14 +87,15 @@ def load_suit(path: str | Path | None = None) -> SuitSpec:
     Raises :class:`tbha_graph.core.errors.NodeError` naming the file and the problem.
     """
     from ..core.errors import NodeError
+    from ..core.yamlfile import load_yaml
 
     path = DEFAULT_SUIT_PATH if path is None else Path(path)
     if not path.is_file():
         raise NodeError(f"suit spec {path} does not exist", hint="give the path of a suit YAML; see tbha_graph/mocap/suit_default.yaml")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as e:
-        raise NodeError(f"suit spec {path} is not valid YAML: {e}") from None
+    data, problems = load_yaml(path)  # safe loading; reports bad bytes, syntax errors and duplicate keys with their line
+    if problems:
+        raise NodeError(f"suit spec {path} is not valid: {problems[0].message}", location=problems[0].location,
+                        hint=problems[0].hint) from None
     try:
         return SuitSpec.model_validate(data)
     except Exception as e:

@@ -127,14 +127,13 @@ def load_mapping(name_or_path: str | Path) -> SkeletonMapping:
 
     Raises :class:`MappingError` naming the file (and line, when known) and what is wrong.
     """
+    from ...core.yamlfile import load_yaml
+
     path = resolve_mapping_path(name_or_path)
+    data, problems = load_yaml(path)  # safe loading; reports bad bytes, syntax errors and duplicate keys with their line
+    if problems:
+        raise MappingError(problems[0].message, location=problems[0].location or Location(str(path)), hint=problems[0].hint)
     text = path.read_text(encoding="utf-8")
-    try:
-        data = yaml.safe_load(text)
-    except yaml.MarkedYAMLError as e:
-        mark = e.problem_mark
-        raise MappingError(f"YAML syntax error: {e.problem}",
-                           location=Location(str(path), mark.line + 1 if mark else 0)) from None
     if not isinstance(data, dict):
         raise MappingError("a mapping file must be a YAML mapping with 'units_to_metres' and 'joints'",
                            location=Location(str(path)))
