@@ -23,7 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.errors import NodeError
 from ...core.node import node
-from ...core.types import File
+from ...core.types import File, atomic_write_bytes
 from ..ports import ROTATIONS
 from ..skeleton import JOINT_INDEX, JOINT_NAMES, PARENTS
 from .presets import contact_sheet, get_preset, write_checked
@@ -96,8 +96,6 @@ def checked_rotations(rot: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarra
     return local / norm[..., None], root, offsets, ends, fps
 
 
-_checked_inputs = checked_rotations  # the name this module used first
-
 
 def preset_for(p: ExportBvhParams):
     """The :class:`.presets.Preset` these params ask for (explicit ``scale`` / ``rotation_order`` win)."""
@@ -124,11 +122,9 @@ def placeholder_png(path: Path, text: str) -> Path:
     """A small PNG saying why there is no contact sheet (the output port always holds a file)."""
     import cv2
 
-    from ...core.types import atomic_write_bytes
-
     img = np.full((40, 420, 3), 255, dtype=np.uint8)
     cv2.putText(img, text, (8, 26), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (60, 60, 60), 1, cv2.LINE_AA)
-    ok, buf = cv2.imencode(".png", img)
+    _, buf = cv2.imencode(".png", img)
     atomic_write_bytes(path, buf.tobytes())
     return path
 
