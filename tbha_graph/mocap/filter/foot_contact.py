@@ -207,7 +207,9 @@ def lock_feet(joints: np.ndarray, contacts: dict[str, np.ndarray], blend: int) -
     stats = {"ik_frames": 0, "ik_clamped_frames": 0, "ik_max_residual_mm": 0.0}
     for side, (hip, knee, ankle) in LEGS.items():
         target, weight = lock_targets(joints[:, ankle], contacts[side], blend)
-        f = np.flatnonzero(weight > 0)
+        l1 = np.linalg.norm(joints[:, knee] - joints[:, hip], axis=-1)
+        l2 = np.linalg.norm(joints[:, ankle] - joints[:, knee], axis=-1)
+        f = np.flatnonzero((weight > 0) & (l1 > 1e-6) & (l2 > 1e-6))  # a collapsed leg cannot bend: left as is
         if f.size == 0:
             continue
         goal = (1.0 - weight[f, None]) * joints[f, ankle] + weight[f, None] * target[f]
