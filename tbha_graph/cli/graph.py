@@ -62,7 +62,7 @@ def describe_node(spec) -> str:
         default = "required" if f.is_required() else f"default {json.dumps(f.get_default(call_default_factory=True), default=str)}"
         extra = f.json_schema_extra if isinstance(f.json_schema_extra, dict) else {}
         unit = f" [{extra['unit']}]" if extra.get("unit") else ""
-        cons = " ".join(str(m) for m in f.metadata if not callable(m) and "FileContent" not in str(m))
+        cons = " ".join(str(m) for m in f.metadata if type(m).__module__ == "annotated_types")
         lines.append(f"  {name:<18} {default}{unit}{('  ' + cons) if cons else ''}")
         if f.description:
             lines.append(f"  {'':<18}   {f.description}")
