@@ -170,7 +170,8 @@ def build_graph(decl: PipelineDecl, registry: Registry | None = None) -> Graph:
                         f"'{spec.type}' has no input port '{port}'{did_you_mean(port, spec.inputs)}",
                         location=v.loc,
                         node=nid,
-                        hint=f"input ports: {', '.join(spec.inputs) or '(none)'}",
+                        hint=f"input ports: {', '.join(spec.inputs) or '(none)'}; an input inherited through "
+                        f"'extends' is disconnected with `inputs: {{{port}: null}}`",
                     )
                 )
                 continue

@@ -12,8 +12,8 @@ A pipeline file::
 
 Merging with ``extends`` (and study variants): a child node with a new id is added; one with an
 existing id overrides fields: ``params`` and ``inputs`` are merged key by key, and a changed ``type``
-drops the parent's params (they belonged to the old type) but keeps its wiring. ``remove: true``
-deletes a node. ``outputs`` and ``vars`` merge by key.
+drops the parent's params (they belonged to the old type) but keeps its wiring; ``inputs: {port: null}``
+disconnects an inherited input. ``remove: true`` deletes a node. ``outputs`` and ``vars`` merge by key.
 """
 from __future__ import annotations
 
@@ -118,6 +118,9 @@ def merge_node_override(decl: PipelineDecl, node_id: str, body: Any, loc: Locati
             continue
         target = getattr(existing, section)
         for k, v in sub.items():
+            if v is None and section == "inputs":  # `inputs: {port: null}` disconnects an inherited input
+                target.pop(str(k), None)
+                continue
             target[str(k)] = Value(v, _loc(sub, k, loc), base_dir)
 
 

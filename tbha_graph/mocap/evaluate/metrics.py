@@ -46,7 +46,7 @@ from ...core.node import node, optional
 from ...core.types import Array, Arrays
 from ..io.ground_truth import TRUTH, check_ground_truth, truth_joints2d, truth_visibility
 from ..ports import CAMERA, METRICS, MOTION, TRACKS2D
-from ..skeleton import JOINT_NAMES, N_JOINTS
+from ..skeleton import JOINT_NAMES, N_JOINTS, PATCHED_JOINTS
 from . import measures as m
 
 _PER_FRAME = Array("float", ("n_frames",))
@@ -128,6 +128,26 @@ def truth_figures(joints: np.ndarray, fps: float, truth: dict, alignment: str) -
     return figures, per_frame
 
 
+def patch_figures(joints: np.ndarray, points: np.ndarray, truth: dict, alignment: str) -> dict:
+    """Figures against the patches themselves, when a render's truth has them: the tracker is asked to
+    find patch centres (``patch2d``), and the seed's method reconstructs patch centres
+    (``patch_centers_world``), which sit on the suit a few centimetres in front of the joint centres.
+    ``tracking_2d_px_*``: tracks vs ``patch2d`` for visible patches; ``marker_mpjpe_mm``: the 3D joints
+    of the patched joints vs the patch centres (same clip alignment as ``mpjpe_mm``)."""
+    out: dict = {}
+    idx = [JOINT_NAMES.index(j) for j in PATCHED_JOINTS]
+    if "patch2d" in truth and "patch_visible" in truth:
+        vis = np.asarray(truth["patch_visible"], dtype=bool)
+        e = m.masked_distances(points[:, idx], np.asarray(truth["patch2d"], dtype=np.float64), vis)
+        out["tracking_2d_px_median"] = _figure(m.nan_percentile(e, 50))
+        out["tracking_2d_px_p95"] = _figure(m.nan_percentile(e, 95))
+    if "patch_centers_world" in truth:
+        gt = np.asarray(truth["patch_centers_world"], dtype=np.float64)
+        aligned, _ = m.align_clip(joints[:, idx], gt, alignment)
+        out["marker_mpjpe_mm"] = _figure(m.nan_mean(m.joint_distances(aligned, gt) * 1000.0))
+    return out
+
+
 def compute_metrics(
     motion: dict, tracks: dict, camera, truth: dict | None = None, raw_motion: dict | None = None, alignment: str = "similarity"
 ) -> tuple[dict, dict[str, np.ndarray]]:
@@ -167,6 +187,7 @@ def compute_metrics(
             metrics["error_2d_px_median"] = _figure(m.nan_percentile(e2d, 50))
             metrics["error_2d_px_p95"] = _figure(m.nan_percentile(e2d, 95))
             errors["error_2d_px"] = m.frame_mean(e2d)
+        metrics.update(patch_figures(joints, points, truth, alignment))
         if raw is not None:
             raw_figures, _ = truth_figures(raw, fps, truth, alignment)
             metrics["raw_mpjpe_mm"] = raw_figures["mpjpe_mm"]
