@@ -14,8 +14,9 @@ from tbha_graph.core.testing import run_node
 from tbha_graph.mocap.io.keypoint_layouts import (
     MEDIAPIPE_POSE, OPENPOSE_BODY25, fill_untracked, joints16_from_landmarks,
 )
-from tbha_graph.mocap.io.keypoints_mediapipe import MEDIAPIPE_TO_WORLD, mediapipe_keypoints, mediapipe_world
-from tbha_graph.mocap.io.keypoints_openpose import openpose_keypoints
+from tbha_graph.mocap.io.mediapipe_keypoints import mediapipe_keypoints
+from tbha_graph.mocap.io.mediapipe_world import MEDIAPIPE_TO_WORLD, mediapipe_world
+from tbha_graph.mocap.io.openpose_keypoints import openpose_keypoints
 from tbha_graph.mocap.io.keypoints_synth import SynthOptions, anatomical_points, synthesize_keypoints
 from tbha_graph.mocap.skeleton import JOINT_INDEX, measure_bone_lengths
 

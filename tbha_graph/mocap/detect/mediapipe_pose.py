@@ -10,7 +10,7 @@ numpy 2, so install it without its declared dependencies::
 
 Frames are streamed (``iter_frames``), converted BGR -> RGB and processed in video mode (tracking between
 frames, ``static_image_mode=False``) unless ``static_image_mode`` is set. The landmarks map onto the 16
-joints as for MediaPipe files (:mod:`tbha_graph.mocap.io.keypoints_mediapipe`): ``tracks`` in pixels,
+joints as for MediaPipe files (:mod:`tbha_graph.mocap.io.mediapipe_keypoints`): ``tracks`` in pixels,
 ``tracked`` = visibility >= ``threshold``; ``motion`` from the world landmarks, y up, camera-aligned heading.
 """
 from __future__ import annotations
@@ -23,7 +23,8 @@ from pydantic import ConfigDict, Field, field_validator
 from ...core.errors import NodeError
 from ...core.node import node
 from ..io.keypoint_layouts import MEDIAPIPE_POSE, TorsoFractions
-from ..io.keypoints_mediapipe import MediaPipeTake, motion_from_mediapipe, tracks_from_mediapipe
+from ..io.mediapipe_keypoints import MediaPipeTake, tracks_from_mediapipe
+from ..io.mediapipe_world import motion_from_mediapipe
 from ..io.video import iter_frames
 from ..ports import MOTION, TRACKS2D, VIDEO, VideoClip
 

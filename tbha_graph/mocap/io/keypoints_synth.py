@@ -7,7 +7,7 @@ with a known pinhole camera and writes what the detectors would have written:
 * ``mediapipe.json`` and ``mediapipe.csv``: MediaPipe Pose (33 landmarks, image coordinates normalised to
   [0, 1], ``z`` relative to the hips, ``visibility``; ``world_landmarks`` in metres, camera-aligned axes x
   right, y down, z away from the camera, origin between the hips), in the layouts documented in
-  :mod:`tbha_graph.mocap.io.keypoints_mediapipe`;
+  :mod:`tbha_graph.mocap.io.mediapipe_keypoints`;
 * ``openpose/<name>_<12-digit frame>_keypoints.json``: one OpenPose file per frame (``BODY_25`` or ``COCO``);
 * ``ground_truth.npz``: ``joints3d_world`` (n, 16, 3) m, ``joints2d`` (n, 16, 2) px, ``K``, ``R``, ``t``,
   ``width``, ``height``, ``fps``, ``joint_names`` (the keys of the renderer's ground truth; also a camera
