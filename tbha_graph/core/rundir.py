@@ -6,6 +6,7 @@ A failed run therefore never leaves an output folder that looks complete.
 """
 from __future__ import annotations
 
+import errno
 import hashlib
 import importlib.metadata as md
 import json
@@ -74,6 +75,27 @@ def manifest(run: RunResult, executor: str) -> dict[str, Any]:
     }
 
 
+def _swap_in(staging: Path, out_dir: Path, parent: Path, attempts: int = 20) -> None:
+    """Rename ``staging`` to ``out_dir``, moving a previous ``out_dir`` aside first. Another run writing
+    the same folder at the same moment can move it, or put its own in place, between the two renames:
+    then try again (the last complete run wins; no run fails because of another)."""
+    for attempt in range(attempts):
+        old = parent / f".{out_dir.name}.old-{uuid.uuid4().hex[:6]}"
+        try:
+            os.replace(out_dir, old)
+        except FileNotFoundError:
+            old = None
+        try:
+            os.replace(staging, out_dir)
+            return
+        except OSError as e:
+            if e.errno not in (errno.ENOTEMPTY, errno.EEXIST) or attempt == attempts - 1:
+                raise
+        finally:
+            if old is not None:
+                shutil.rmtree(old, ignore_errors=True)
+
+
 def write_run_dir(run: RunResult, out_dir: Path, executor: str = "local") -> list[Path]:
     """Write every named output and ``manifest.json`` to ``out_dir`` atomically; returns the files."""
     out_dir = Path(out_dir)
@@ -100,13 +122,7 @@ def write_run_dir(run: RunResult, out_dir: Path, executor: str = "local") -> lis
             json.dump(manifest(run, executor), f, indent=2, sort_keys=False)
             f.flush()
             os.fsync(f.fileno())
-        old = None
-        if out_dir.exists():
-            old = parent / f".{out_dir.name}.old-{uuid.uuid4().hex[:6]}"
-            os.replace(out_dir, old)
-        os.replace(staging, out_dir)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
+        _swap_in(staging, out_dir, parent)
     except OSError as e:
         shutil.rmtree(staging, ignore_errors=True)
         raise TbhaError(
