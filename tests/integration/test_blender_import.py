@@ -1,20 +1,20 @@
-"""The BVH written by ``export.bvh`` imported into real Blender (``bpy`` 5.0.1, headless) lands where the
-project's own forward kinematics puts it: every joint within 1 mm on every frame.
+"""BVH files written by ``export.bvh``, imported into real Blender (``bpy`` 5.0.1, headless), land where
+the project's own forward kinematics of the exported rotations puts them: every joint and every End
+Site within 1 mm on every frame.
 
 Blender runs in a child process (``python -c`` with ``bpy``): ``bpy`` is a whole Blender in one module
-(0.5 s to import, its own global state), kept out of pytest's process. The child imports the file with
-``bpy.ops.import_anim.bvh`` twice:
+(0.5 s to import, global state of its own), kept out of pytest's process. The child imports each file
+with ``bpy.ops.import_anim.bvh`` into an empty scene, steps through the frames (the importer keys BVH
+frame ``i``, 0-based, at Blender frame ``frame_start + i``, ``frame_start=1``) and records, per bone,
+``matrix_world @ pose_bone.head`` and ``matrix_world @ pose_bone.tail`` in world space. Blender makes
+one bone per BVH joint, named like the joint, from the joint to its only child (or to its End Site for
+a leaf): a bone's head is its joint, a leaf bone's tail its End Site.
 
-* with the importer's defaults (``axis_forward='-Z', axis_up='Y'``), which bake the axis change
-  BVH (x, y, z) -> Blender (x, -z, y) into the armature (its ``matrix_world`` stays identity);
-* with ``axis_forward='Y', axis_up='Z'`` (no conversion): Blender coordinates equal BVH coordinates.
-
-Then it steps through the frames (the importer keys BVH frame ``i``, 0-based, at Blender frame
-``frame_start + i``, ``frame_start=1``) and records, per bone, ``matrix_world @ pose_bone.head`` and
-``matrix_world @ pose_bone.tail`` in world space. Blender makes one bone per BVH joint, named like the
-joint, running from the joint to its only child (or to its End Site for a leaf): a bone's head is its
-joint; a leaf bone's tail is the End Site. Blender ignores a non-zero root OFFSET and treats the root
-position channels as absolute, as the project's reader does.
+Import settings: the importer's defaults (``axis_forward='-Z', axis_up='Y'``) bake the axis change
+BVH (x, y, z) -> Blender (x, -z, y) into the armature (``matrix_world`` stays identity);
+``axis_forward='Y', axis_up='Z'`` means no conversion. Files in centimetres (presets ``y-up``,
+``mixamo``) are imported with ``global_scale=0.01``. Blender ignores a non-zero root OFFSET and takes
+the root position channels as absolute, as the project's reader does. See docs/blender.md.
 """
 from __future__ import annotations
 
@@ -29,121 +29,121 @@ import numpy as np
 import pytest
 
 from tbha_graph.core.testing import run_node
-from tbha_graph.mocap.export.bvh import export_bvh
+from tbha_graph.mocap.export.bvh import export_bvh, joint_names_for
+from tbha_graph.mocap.export.presets import get_preset
 from tbha_graph.mocap.io.skeleton_map import rotations16_from_bvh
 from tbha_graph.mocap.kinematics import forward_kinematics, quat_apply
 from tbha_graph.mocap.skeleton import JOINT_NAMES, PARENTS
 
 REPO = Path(__file__).resolve().parents[2]
 CMU_CLIP = REPO / "data" / "mocap" / "cmu" / "131_02.bvh"
+DEFAULT_PIPELINE = REPO / "pipelines" / "default.yaml"
+SAMPLE_VIDEO = REPO / "data" / "sample" / "sample.mp4"
 TOLERANCE_MM = 1.0
 #: frames of the CMU clip used (every 15th of 720: 48 frames spanning the whole 6 s walk)
 FRAME_STEP = 15
+#: frames of the bundled sample video run through the default pipeline (T-pose lead-in, then walking)
+DEFAULT_PIPELINE_FRAMES = 60
 
 #: Blender coordinates of a point with BVH coordinates (x, y, z), importer defaults: (x, -z, y).
 DEFAULT_AXES = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+NO_CONVERSION = {"axis_forward": "Y", "axis_up": "Z"}
+LEAVES = [j for j in range(len(JOINT_NAMES)) if j not in set(PARENTS.tolist())]
 
-# Runs inside the child process: import the BVH twice, sample every frame, write JSON.
+# Runs inside the child process: import each BVH of a job list into an empty scene, sample every
+# frame, write one JSON report.
 BLENDER_SCRIPT = textwrap.dedent(
     r"""
     import json, sys
     import bpy
 
-    bvh_path, out_path = sys.argv[1], sys.argv[2]
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
+    jobs = json.load(open(sys.argv[1]))
     result = {"version": bpy.app.version_string, "imports": {}}
-    settings = {
-        "default": {},  # the importer's own defaults: axis_forward='-Z', axis_up='Y'
-        "no_conversion": {"axis_forward": "Y", "axis_up": "Z"},
-    }
-    for label, axes in settings.items():
-        before = set(bpy.data.objects)
-        status = bpy.ops.import_anim.bvh(
-            filepath=bvh_path, target="ARMATURE", global_scale=1.0, frame_start=1,
-            use_fps_scale=False, update_scene_fps=False, update_scene_duration=True,
-            rotate_mode="NATIVE", **axes)
-        (arm,) = [o for o in bpy.data.objects if o not in before]
+    for job in jobs:
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        scene = bpy.context.scene
+        status = bpy.ops.import_anim.bvh(filepath=job["bvh"], **job["settings"])
+        (arm,) = bpy.data.objects
         action = arm.animation_data.action
         first, last = (int(round(f)) for f in action.frame_range)
         heads, tails = [], []
         for frame in range(first, last + 1):
             scene.frame_set(frame)
             mw = arm.matrix_world
-            names = [pb.name for pb in arm.pose.bones]
             heads.append([list(mw @ pb.head) for pb in arm.pose.bones])
             tails.append([list(mw @ pb.tail) for pb in arm.pose.bones])
-        result["imports"][label] = {
+        result["imports"][job["label"]] = {
             "status": sorted(status),
             "object_type": arm.type,
             "matrix_world": [list(r) for r in arm.matrix_world],
             "frame_range": [first, last],
-            "bones": names,
+            "bones": [pb.name for pb in arm.pose.bones],
             "heads": heads,
             "tails": tails,
         }
-    with open(out_path, "w") as f:
-        json.dump(result, f)
+    json.dump(result, open(sys.argv[2], "w"))
     """
 )
 
 
-def _bpy_available() -> str:
-    """'' when a child Python can import bpy, else the reason it cannot."""
+def _bpy_missing() -> str:
+    """'' when a child Python can import bpy, else why not."""
     probe = subprocess.run([sys.executable, "-c", "import bpy"], capture_output=True, text=True, timeout=120)
     if probe.returncode == 0:
         return ""
     last = (probe.stderr.strip().splitlines() or ["(no message)"])[-1]
-    return f"bpy (Blender as a Python module) is not importable here: {last}; install it with `pip install bpy==5.0.1` (see docs/blender.md)"
+    return (f"bpy (Blender as a Python module) is not importable: {last}; "
+            f"install it with `pip install bpy==5.0.1` (see docs/blender.md)")
 
 
 @pytest.fixture(scope="module")
 def blender() -> None:
-    reason = _bpy_available()
+    reason = _bpy_missing()
     if reason:
         pytest.skip(reason)
 
 
-def blender_import(bvh_path: Path, out_json: Path) -> dict:
-    """Import ``bvh_path`` in a Blender child process; returns its JSON report (see BLENDER_SCRIPT)."""
-    env = dict(os.environ, PYTHONNOUSERSITE="1")
+def import_in_blender(jobs: list[dict], work: Path) -> dict:
+    """Run BLENDER_SCRIPT on ``jobs`` ({label, bvh, settings}) in a child process; returns its report."""
+    (work / "jobs.json").write_text(json.dumps(jobs))
     proc = subprocess.run(
-        [sys.executable, "-c", BLENDER_SCRIPT, str(bvh_path), str(out_json)],
-        capture_output=True, text=True, timeout=300, env=env, cwd=out_json.parent,
+        [sys.executable, "-c", BLENDER_SCRIPT, str(work / "jobs.json"), str(work / "blender.json")],
+        capture_output=True, text=True, timeout=300, env=dict(os.environ, PYTHONNOUSERSITE="1"), cwd=work,
     )
     assert proc.returncode == 0, f"Blender import failed:\n{proc.stdout[-2000:]}\n{proc.stderr[-4000:]}"
-    return json.loads(out_json.read_text())
+    report = json.loads((work / "blender.json").read_text())
+    assert report["version"].startswith("5.0")
+    return report
+
+
+def import_settings(preset: str, convert: bool = True) -> dict:
+    s = {"target": "ARMATURE", "frame_start": 1, "use_fps_scale": False, "update_scene_fps": False,
+         "rotate_mode": "NATIVE", "global_scale": 1.0 / get_preset(preset).units_per_metre}
+    return s if convert else {**s, **NO_CONVERSION}
 
 
 def expected_points(rot: dict[str, np.ndarray]) -> tuple[np.ndarray, dict[int, np.ndarray]]:
-    """Forward kinematics of a ROTATIONS bundle: joints (n, 16, 3) and End Sites {leaf: (n, 3)}, metres, BVH axes."""
+    """FK of a ROTATIONS bundle: joints (n, 16, 3) and End Sites {leaf: (n, 3)}, metres, world axes."""
     pos, world = forward_kinematics(PARENTS, rot["offsets"], rot["local_quat"], rot["root_position"])
-    leaves = [j for j in range(len(JOINT_NAMES)) if j not in set(PARENTS.tolist())]
-    ends = {j: pos[:, j] + quat_apply(world[:, j], rot["end_offsets"][j]) for j in leaves}
-    return pos, ends
+    return pos, {j: pos[:, j] + quat_apply(world[:, j], rot["end_offsets"][j]) for j in LEAVES}
 
 
-def compare(report: dict, rot: dict[str, np.ndarray], axes: np.ndarray) -> tuple[float, float]:
-    """Worst joint (head) and End Site (leaf tail) error in mm of one Blender import against FK."""
+def blender_errors_mm(imp: dict, rot: dict[str, np.ndarray], axes: np.ndarray, names: list[str]) -> tuple[float, float]:
+    """Worst joint (bone head) and End Site (leaf bone tail) distance, mm, of one import from FK."""
     want_pos, want_ends = expected_points(rot)
     n = want_pos.shape[0]
-    assert report["frame_range"] == [1, n], "the importer keys BVH frame i at Blender frame 1 + i"
-    assert report["object_type"] == "ARMATURE"
-    assert np.allclose(report["matrix_world"], np.eye(4)), "the axis conversion is baked into the armature"
-    bones = report["bones"]
-    assert sorted(bones) == sorted(JOINT_NAMES), "one Blender bone per BVH joint, named like the joint"
-    heads = np.asarray(report["heads"])  # (n, 16, 3) metres, Blender axes, bone order
-    tails = np.asarray(report["tails"])
-    order = [bones.index(name) for name in JOINT_NAMES]
-    got_pos = heads[:, order]
-    head_err = np.linalg.norm(got_pos - want_pos @ axes.T, axis=-1) * 1000.0
-    end_err = max(
-        float(np.max(np.linalg.norm(tails[:, bones.index(JOINT_NAMES[j])] - e @ axes.T, axis=-1))) * 1000.0
-        for j, e in want_ends.items()
-    )
-    worst = np.unravel_index(int(np.argmax(head_err)), head_err.shape)
-    print(f"blender: worst joint {JOINT_NAMES[worst[1]]} on frame {worst[0]}: {head_err[worst]:.5f} mm; "
-          f"worst End Site {end_err:.5f} mm")
+    assert imp["status"] == ["FINISHED"] and imp["object_type"] == "ARMATURE"
+    assert imp["frame_range"] == [1, n], "BVH frame i is keyed at Blender frame 1 + i"
+    assert np.allclose(imp["matrix_world"], np.eye(4)), "the axis conversion is baked into the armature"
+    bones = imp["bones"]
+    assert sorted(bones) == sorted(names), "one Blender bone per BVH joint, named like the joint"
+    order = [bones.index(nm) for nm in names]
+    heads = np.asarray(imp["heads"])[:, order]  # (n, 16, 3) metres, Blender axes, our joint order
+    tails = np.asarray(imp["tails"])[:, order]
+    head_err = np.linalg.norm(heads - want_pos @ axes.T, axis=-1) * 1000.0
+    end_err = max(float(np.linalg.norm(tails[:, j] - want_ends[j] @ axes.T, axis=-1).max()) for j in LEAVES) * 1000.0
+    f, j = np.unravel_index(int(np.argmax(head_err)), head_err.shape)
+    print(f"blender: worst joint {JOINT_NAMES[j]} frame {f}: {head_err[f, j]:.5f} mm; worst End Site {end_err:.5f} mm")
     return float(head_err.max()), end_err
 
 
@@ -155,42 +155,65 @@ def cmu_rotations() -> dict[str, np.ndarray]:
             "fps": np.asarray(float(rot["fps"]) / FRAME_STEP)}
 
 
-def test_exported_cmu_bvh_matches_forward_kinematics_in_blender(blender, cmu_rotations, tmp_path) -> None:
+PRESETS = ["none", "blender", "y-up", "mixamo"]
+
+
+def test_exported_cmu_motion_matches_fk_in_blender(blender, cmu_rotations, tmp_path) -> None:
+    """Every export preset, imported the way docs/blender.md says, puts every joint within 1 mm."""
     rot = cmu_rotations
-    n = rot["local_quat"].shape[0]
-    assert n >= 40
-    path = run_node(export_bvh, {}, work_dir=tmp_path, rotations=rot)["bvh"]
-    report = blender_import(Path(path), tmp_path / "blender.json")
-    assert report["version"].startswith("5.0")
+    assert rot["local_quat"].shape[0] >= 40
+    jobs = []
+    for preset in PRESETS:
+        d = tmp_path / preset
+        d.mkdir()
+        path = run_node(export_bvh, {"preset": preset, "sheet": False}, work_dir=d, rotations=rot)["bvh"]
+        jobs.append({"label": preset, "bvh": str(path), "settings": import_settings(preset)})
+    jobs.append({"label": "none, no conversion", "bvh": jobs[0]["bvh"], "settings": import_settings("none", convert=False)})
+    report = import_in_blender(jobs, tmp_path)["imports"]
 
-    # importer defaults: BVH (x, y, z) -> Blender (x, -z, y)
-    head_mm, end_mm = compare(report["imports"]["default"], rot, DEFAULT_AXES)
+    for preset in PRESETS:
+        head_mm, end_mm = blender_errors_mm(report[preset], rot, DEFAULT_AXES, joint_names_for(get_preset(preset).naming))
+        assert head_mm < TOLERANCE_MM and end_mm < TOLERANCE_MM, preset
+    head_mm, end_mm = blender_errors_mm(report["none, no conversion"], rot, np.eye(3), list(JOINT_NAMES))
     assert head_mm < TOLERANCE_MM and end_mm < TOLERANCE_MM
-    # axis_forward='Y', axis_up='Z': no conversion
-    head_mm2, end_mm2 = compare(report["imports"]["no_conversion"], rot, np.eye(3))
-    assert head_mm2 < TOLERANCE_MM and end_mm2 < TOLERANCE_MM
 
-    # the comparison discriminates: the motion moves metres, and the wrong axis convention is far off
+    # the comparison discriminates: the walk covers metres, and the other axis convention is far off
     pos, _ = expected_points(rot)
-    assert np.ptp(pos[:, 0], axis=0).max() > 0.5, "the clip should travel (a walk)"
-    heads = np.asarray(report["imports"]["default"]["heads"])
-    order = [report["imports"]["default"]["bones"].index(nm) for nm in JOINT_NAMES]
-    wrong = np.linalg.norm(heads[:, order] - pos, axis=-1).max() * 1000.0
-    assert wrong > 100.0, "without the axis change the default import must not match"
+    assert np.ptp(pos[:, 0], axis=0).max() > 0.5
+    imp = report["none"]
+    heads = np.asarray(imp["heads"])[:, [imp["bones"].index(nm) for nm in JOINT_NAMES]]
+    assert np.linalg.norm(heads - pos, axis=-1).max() * 1000.0 > 100.0
 
 
 def test_non_zero_root_offset_is_ignored_like_blender(blender, cmu_rotations, tmp_path) -> None:
-    """A ROTATIONS bundle whose root offset is non-zero: the file's root OFFSET must not move anything
-    (Blender and the project both treat the root position channels as absolute)."""
-    rot = dict(cmu_rotations)
-    rot["local_quat"] = rot["local_quat"][:8]
-    rot["root_position"] = rot["root_position"][:8]
-    offsets = rot["offsets"].copy()
-    offsets[0] = [0.3, -0.2, 0.5]
-    rot["offsets"] = offsets
-    path = run_node(export_bvh, {}, work_dir=tmp_path, rotations=rot)["bvh"]
-    text = Path(path).read_text()
-    assert "OFFSET 0.300000 -0.200000 0.500000" in text.splitlines()[3]
-    report = blender_import(Path(path), tmp_path / "blender.json")
-    head_mm, end_mm = compare(report["imports"]["default"], rot, DEFAULT_AXES)
+    """A non-zero root offset is written to the file's root OFFSET and must move nothing (Blender and
+    the project both take the root position channels as absolute)."""
+    rot = {**cmu_rotations, "local_quat": cmu_rotations["local_quat"][:8],
+           "root_position": cmu_rotations["root_position"][:8], "offsets": cmu_rotations["offsets"].copy()}
+    rot["offsets"][0] = [0.3, -0.2, 0.5]
+    path = run_node(export_bvh, {"sheet": False}, work_dir=tmp_path, rotations=rot)["bvh"]
+    assert Path(path).read_text().splitlines()[3].split() == ["OFFSET", "0.300000", "-0.200000", "0.500000"]
+    report = import_in_blender([{"label": "x", "bvh": str(path), "settings": import_settings("none")}], tmp_path)
+    head_mm, end_mm = blender_errors_mm(report["imports"]["x"], rot, DEFAULT_AXES, list(JOINT_NAMES))
+    assert head_mm < TOLERANCE_MM and end_mm < TOLERANCE_MM
+
+
+def test_default_pipeline_bvh_matches_fk_in_blender(blender, tmp_path) -> None:
+    """``pipelines/default.yaml`` on the first frames of the bundled sample video: its ``motion.bvh``,
+    imported with Blender's defaults, against FK of the pipeline's own ``rotations`` output."""
+    if not (DEFAULT_PIPELINE.is_file() and SAMPLE_VIDEO.is_file()):
+        pytest.skip("pipelines/default.yaml or data/sample/sample.mp4 is missing")
+    from tbha_graph.core.runner import load_graph, run_graph
+
+    graph = load_graph(DEFAULT_PIPELINE, sets={"decode.stop": DEFAULT_PIPELINE_FRAMES})
+    run = run_graph(graph, outputs=["motion.bvh"], cache=False, out_dir=tmp_path / "run")
+    rid = graph.outputs["motion.bvh"][0]
+    src, port = graph.nodes[rid].inputs["rotations"]
+    rot = run.results[src].value(port, graph.nodes[src])
+    assert rot["local_quat"].shape[0] == DEFAULT_PIPELINE_FRAMES
+    bvh = tmp_path / "run" / "motion.bvh"
+    preset = graph.nodes[rid].params.preset
+    report = import_in_blender([{"label": "default", "bvh": str(bvh), "settings": import_settings(preset)}], tmp_path)
+    head_mm, end_mm = blender_errors_mm(report["imports"]["default"], rot, DEFAULT_AXES,
+                                       joint_names_for(get_preset(preset).naming))
     assert head_mm < TOLERANCE_MM and end_mm < TOLERANCE_MM
