@@ -43,8 +43,10 @@ The heading is the camera's (MediaPipe gives no ground plane): a tilted camera t
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -58,6 +60,18 @@ from ..skeleton import JOINT_NAMES
 from .keypoint_layouts import MEDIAPIPE_POSE, TorsoFractions, fill_untracked, joints16_from_landmarks
 
 N_LANDMARKS = MEDIAPIPE_POSE.size
+#: numbers as written by programs (int()/float() alone also take '1_0', '¹', 'infinity')
+_INT = re.compile(r"[-+]?[0-9]+")
+_DECIMAL = re.compile(r"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?|[-+]?(?:nan|inf|infinity)", re.IGNORECASE)
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _not_utf8(path: Path, e: UnicodeDecodeError) -> NodeError:
+    line = path.read_bytes()[: e.start].count(b"\n") + 1
+    return NodeError(f"{path}:{line}: not UTF-8 text (byte {e.object[e.start]:#04x})", hint="save the file as UTF-8")
 
 
 @dataclass
@@ -84,10 +98,13 @@ def _landmark_rows(items, path: Path, frame: int, key: str) -> np.ndarray:
     for i, lm in enumerate(items):
         try:
             if isinstance(lm, dict):
-                out[i] = (lm["x"], lm["y"], lm.get("z", 0.0), lm.get("visibility", 1.0))
+                vals = [lm["x"], lm["y"], lm.get("z", 0.0), lm.get("visibility", 1.0)]
             else:
-                vals = list(lm) + [1.0] * (4 - len(lm))
-                out[i] = vals[:4]
+                vals = (list(lm) + [1.0] * (4 - len(lm)))[:4]
+            bad = [v for v in vals if not _is_number(v)]
+            if bad:  # true, "0.5", null: not what a detector writes; numpy would quietly take some of them
+                raise ValueError(f"{bad[0]!r} is not a number")
+            out[i] = vals
         except (KeyError, TypeError, ValueError) as e:
             raise NodeError(f"{path}: frame {frame}: '{key}' landmark {i} ({MEDIAPIPE_POSE.landmarks[i]}) is not "
                             f"{{x, y, z, visibility}} numbers: {e}") from None
@@ -115,6 +132,8 @@ def read_mediapipe_json(path: str | Path) -> MediaPipeTake:
         doc = json.loads(path.read_text(encoding="utf-8"))
     except json.JSONDecodeError as e:
         raise NodeError(f"{path}:{e.lineno}:{e.colno}: invalid JSON: {e.msg}") from None
+    except UnicodeDecodeError as e:
+        raise _not_utf8(path, e) from None
     except OSError as e:
         raise NodeError(f"cannot read {path}: {e}") from None
     meta = doc if isinstance(doc, dict) else {}
@@ -177,10 +196,12 @@ def read_mediapipe_csv(path: str | Path) -> MediaPipeTake:
     """Read a MediaPipe Pose CSV file (layout in the module docstring); NodeError on bad input."""
     path = Path(path)
     try:
-        f = open(path, newline="", encoding="utf-8")
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
+        raise _not_utf8(path, e) from None
     except OSError as e:
         raise NodeError(f"cannot read {path}: {e}") from None
-    with f:
+    with io.StringIO(text, newline="") as f:
         reader = csv.reader(f)
         header = [h.strip().lower() for h in next(reader, [])]
         need = ("frame", "landmark", "x", "y")
@@ -197,12 +218,11 @@ def read_mediapipe_csv(path: str | Path) -> MediaPipeTake:
                 continue
             if len(row) < len(header):
                 raise NodeError(f"{path}:{line_no}: {len(row)} values, the header has {len(header)}")
-            try:
-                frame = int(row[col["frame"]])
-            except ValueError:
-                raise NodeError(f"{path}:{line_no}: frame {row[col['frame']]!r} is not an integer") from None
+            if not _INT.fullmatch(row[col["frame"]].strip()):
+                raise NodeError(f"{path}:{line_no}: frame {row[col['frame']]!r} is not an integer")
+            frame = int(row[col["frame"]])
             lm = row[col["landmark"]].strip()
-            idx = int(lm) if lm.lstrip("-").isdigit() else names.get(lm.lower(), -1)
+            idx = int(lm) if _INT.fullmatch(lm) else names.get(lm.lower(), -1)
             if not 0 <= idx < N_LANDMARKS:
                 raise NodeError(f"{path}:{line_no}: landmark {lm!r} is not 0-{N_LANDMARKS - 1} or a MediaPipe Pose name",
                                 hint=f"names: {', '.join(MEDIAPIPE_POSE.landmarks[:3])}, ...")
@@ -216,10 +236,9 @@ def read_mediapipe_csv(path: str | Path) -> MediaPipeTake:
                 if not text:
                     vals.append(math.nan)
                     continue
-                try:
-                    vals.append(float(text))
-                except ValueError:
-                    raise NodeError(f"{path}:{line_no}: {k} = {row[col[k]]!r} is not a number") from None
+                if not _DECIMAL.fullmatch(text):
+                    raise NodeError(f"{path}:{line_no}: {k} = {row[col[k]]!r} is not a number")
+                vals.append(float(text))
             rows.append((frame, idx, vals))
     if not rows:
         raise NodeError(f"{path}: no landmark rows after the header")

@@ -97,6 +97,8 @@ def read_openpose(folder: str | Path, person: int | str = "largest") -> tuple[np
             doc = json.loads(path.read_text(encoding="utf-8"))
         except json.JSONDecodeError as e:
             raise NodeError(f"{path}:{e.lineno}:{e.colno}: invalid JSON: {e.msg}") from None
+        except UnicodeDecodeError as e:
+            raise NodeError(f"{path}: not UTF-8 text (byte {e.start}: {e.object[e.start]:#04x})", hint="save the file as UTF-8") from None
         people = _person_keypoints(doc, path, num)
         arrs = []
         for k, kp in enumerate(people):
@@ -105,10 +107,9 @@ def read_openpose(folder: str | Path, person: int | str = "largest") -> tuple[np
                 raise NodeError(f"{path}: frame {num}: people[{k}] has {len(kp)} values = {len(kp) / 3:g} keypoints; "
                                 f"expected 3 values (x, y, confidence) for each of {known} keypoints",
                                 hint="only OpenPose's BODY_25 and COCO body models are supported")
-            try:
-                a = np.asarray(kp, dtype=np.float64).reshape(-1, 3)
-            except (TypeError, ValueError):
-                raise NodeError(f"{path}: frame {num}: people[{k}] pose_keypoints_2d holds non-numbers") from None
+            if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in kp):  # numpy takes true, "1.5"
+                raise NodeError(f"{path}: frame {num}: people[{k}] pose_keypoints_2d holds non-numbers")
+            a = np.asarray(kp, dtype=np.float64).reshape(-1, 3)
             if not np.isfinite(a).all():
                 i = int(np.flatnonzero(~np.isfinite(a).all(axis=1))[0])
                 raise NodeError(f"{path}: frame {num}: people[{k}] keypoint {i} is NaN or infinite",
