@@ -5,6 +5,7 @@ A study file::
     description: compare segmenters
     base: ../pipelines/default.yaml
     metrics: metrics.json          # the pipeline output holding the figures (default: metrics.json)
+    outputs: [metrics.json]        # optional: produce only these outputs (skip videos and plots)
     inputs:                        # optional; each is a set of vars / --set overrides
       sample: {vars: {video: ../data/sample/sample.mp4}}
     variants:
@@ -33,7 +34,7 @@ from .runner import load_graph, run_graph
 from .spec import merge_node_override, read_pipeline
 from .yamlfile import LocatedDict, load_yaml
 
-STUDY_KEYS = ("description", "base", "metrics", "inputs", "variants")
+STUDY_KEYS = ("description", "base", "metrics", "outputs", "inputs", "variants")
 
 
 def _flatten(d: Any, prefix: str = "") -> dict[str, Any]:
@@ -105,6 +106,9 @@ def run_study(
                 sets = {**(inp.get("set") or {}), **(variant.get("set") or {})}
                 vars_ = {**(inp.get("vars") or {}), **(variant.get("vars") or {})}
                 graph = load_graph(base, sets=sets, vars=vars_, registry=registry, decl=decl)
+                wanted = study.get("outputs")
+                if wanted:
+                    graph.outputs = {k: v for k, v in graph.outputs.items() if k in wanted}
                 run = run_graph(graph, out_dir=out_dir / vname / iname, cache=cache, reporter=reporter, executor=executor)
                 row["status"] = "ok"
                 row["ran"] = sum(r.status == "ran" for r in run.results.values())

@@ -74,24 +74,25 @@ CALIBRATION_JOINTS: tuple[str, ...] = ("neck", "chest", "hips", "left_shoulder",
 #: The stable triangle the 3D reconstruction starts from (seed 000, section 3.2).
 TRIANGLE_JOINTS: tuple[str, ...] = ("chest", "left_shoulder", "right_shoulder")
 
-#: Typical adult bone lengths in metres (child joint name -> length of the bone from its parent).
-#: Used when the user gives no measurements; anatomical proportions for a ~1.75 m adult.
+#: Default bone lengths in metres (child joint name -> length of the bone from its parent), used when
+#: the user gives no measurements: the left/right averages of CMU subject 131 mapped onto this model
+#: (hips = pelvis root, chest = upper chest, neck = neck base, head = skull base; see data/mocap).
 DEFAULT_BONE_LENGTHS: dict[str, float] = {
-    "chest": 0.25,
-    "neck": 0.22,
-    "head": 0.15,
-    "left_shoulder": 0.21,
-    "left_elbow": 0.28,
-    "left_wrist": 0.25,
-    "right_shoulder": 0.21,
-    "right_elbow": 0.28,
-    "right_wrist": 0.25,
-    "left_hip": 0.11,
-    "left_knee": 0.42,
-    "left_ankle": 0.41,
-    "right_hip": 0.11,
-    "right_knee": 0.42,
-    "right_ankle": 0.41,
+    "chest": 0.224,
+    "neck": 0.091,
+    "head": 0.090,
+    "left_shoulder": 0.184,
+    "left_elbow": 0.246,
+    "left_wrist": 0.190,
+    "right_shoulder": 0.184,
+    "right_elbow": 0.246,
+    "right_wrist": 0.190,
+    "left_hip": 0.122,
+    "left_knee": 0.409,
+    "left_ankle": 0.392,
+    "right_hip": 0.122,
+    "right_knee": 0.409,
+    "right_ankle": 0.392,
 }
 
 #: Unit direction of each bone (parent -> joint) in the rest T-pose, world frame, shape ``(N_JOINTS, 3)``.
@@ -102,16 +103,16 @@ _TPOSE_DIRS = {
     "chest": (0.0, 1.0, 0.0),
     "neck": (0.0, 1.0, 0.0),
     "head": (0.0, 1.0, 0.0),
-    "left_shoulder": (1.0, 0.5, 0.0),
+    "left_shoulder": (0.9, 0.43, 0.0),
     "left_elbow": (1.0, 0.0, 0.0),
     "left_wrist": (1.0, 0.0, 0.0),
-    "right_shoulder": (-1.0, 0.5, 0.0),
+    "right_shoulder": (-0.9, 0.43, 0.0),
     "right_elbow": (-1.0, 0.0, 0.0),
     "right_wrist": (-1.0, 0.0, 0.0),
-    "left_hip": (1.0, -0.55, 0.0),
+    "left_hip": (0.6, -0.8, 0.0),
     "left_knee": (0.0, -1.0, 0.0),
     "left_ankle": (0.0, -1.0, 0.0),
-    "right_hip": (-1.0, -0.55, 0.0),
+    "right_hip": (-0.6, -0.8, 0.0),
     "right_knee": (0.0, -1.0, 0.0),
     "right_ankle": (0.0, -1.0, 0.0),
 }

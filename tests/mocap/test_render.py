@@ -200,7 +200,7 @@ def test_suit_port_camera_rescale_and_motion_blur(tmp_path):
     n = 5
     motion = np.repeat(pose[None], n, axis=0)
     sh = pose[J["left_shoulder"]]
-    for i, ang in enumerate(np.linspace(0.0, 1.2, n)):
+    for i, ang in enumerate(np.linspace(0.0, 2.0, n)):
         for name in ("left_elbow", "left_wrist"):
             r = pose[J[name], 0] - sh[0]
             motion[i, J[name]] = sh + r * np.array([np.cos(ang), -np.sin(ang), 0.0])
