@@ -25,7 +25,7 @@ import yaml
 from .cache import Cache
 from .errors import PipelineError, PipelineErrors, TbhaError
 from .progress import QUIET, Reporter
-from .study import _flatten, write_tables
+from .study import metric_columns, write_tables
 
 
 @dataclass
@@ -98,7 +98,7 @@ def run_take(pipeline: str, take: Take, var_name: str, out_dir: str, cache_root:
         if metrics_name in graph.outputs:
             metrics = run.output(metrics_name)
             if isinstance(metrics, dict):
-                row.update({k: v for k, v in _flatten(metrics).items() if not isinstance(v, list)})
+                row.update(metric_columns(metrics, None))
     except TbhaError as e:
         row["status"] = "failed"
         row["error"] = e.format().replace("\n", " ")[:400]

@@ -23,11 +23,14 @@ def load_graph(
     vars: dict[str, Any] | None = None,
     registry: Registry | None = None,
     decl: PipelineDecl | None = None,
+    base_dir: Path | None = None,
+    source: str = "<command line>",
 ) -> Graph:
-    """Read, override and check a pipeline file (or an already read ``decl``)."""
+    """Read, override and check a pipeline file (or an already read ``decl``). Relative input paths in
+    ``sets``/``vars`` resolve against ``base_dir`` (default: the current folder)."""
     decl = decl if decl is not None else read_pipeline(path)
-    problems = apply_vars(decl, vars)
-    problems += apply_sets(decl, sets or {})
+    problems = apply_vars(decl, vars, base_dir, source)
+    problems += apply_sets(decl, sets or {}, base_dir, source)
     if problems:
         raise PipelineErrors(problems)
     return build_graph(decl, registry)

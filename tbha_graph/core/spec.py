@@ -200,12 +200,16 @@ def parse_assignment(text: str, what: str) -> tuple[str, Any]:
     return name.strip(), value
 
 
-def apply_vars(decl: PipelineDecl, overrides: dict[str, Any] | None = None) -> list[PipelineError]:
-    """Substitute ``${name}`` in every string of params and inputs; returns problems (unknown vars)."""
-    cwd = Path.cwd()
+def apply_vars(decl: PipelineDecl, overrides: dict[str, Any] | None = None, base_dir: Path | None = None,
+               source: str = "<command line>") -> list[PipelineError]:
+    """Substitute ``${name}`` in every string of params and inputs; returns problems (unknown vars).
+
+    ``overrides`` (``--var``) resolve relative input paths against ``base_dir`` (default: the current
+    folder), since they were written there."""
+    cwd = base_dir or Path.cwd()
     values: dict[str, Value] = dict(decl.vars)
     for k, v in (overrides or {}).items():
-        values[k] = Value(v, Location("<command line>"), cwd)
+        values[k] = Value(v, Location(source), cwd)
     errors: list[PipelineError] = []
 
     def subst(v: Value) -> Value:
@@ -246,11 +250,12 @@ def _subst_deep(obj: Any, values: dict[str, Value], loc: Location, errors: list[
     return obj
 
 
-def apply_sets(decl: PipelineDecl, sets: dict[str, Any]) -> list[PipelineError]:
+def apply_sets(decl: PipelineDecl, sets: dict[str, Any], base_dir: Path | None = None,
+               source: str = "<command line>") -> list[PipelineError]:
     """Apply ``--set node.param=value`` (``node.param.sub=value`` for nested params)."""
     errors: list[PipelineError] = []
-    cwd = Path.cwd()
-    loc = Location("<command line>")
+    cwd = base_dir or Path.cwd()
+    loc = Location(source)
     for name, value in sets.items():
         parts = name.split(".")
         if len(parts) < 2:

@@ -6,7 +6,9 @@ A study file::
     base: ../pipelines/default.yaml
     metrics: metrics.json          # the pipeline output holding the figures (default: metrics.json)
     outputs: [metrics.json]        # optional: produce only these outputs (skip videos and plots)
-    inputs:                        # optional; each is a set of vars / --set overrides
+    columns: [mpjpe_mm, lag_ms]    # optional: the metrics shown (default: every top-level figure)
+    inputs:                        # optional; each is a set of vars / --set overrides (relative
+                                   # paths in them start from the study file's folder)
       sample: {vars: {video: ../data/sample/sample.mp4}}
     variants:
       seed: {}                     # the base as it is
@@ -34,7 +36,7 @@ from .runner import load_graph, run_graph
 from .spec import merge_node_override, read_pipeline
 from .yamlfile import LocatedDict, load_yaml
 
-STUDY_KEYS = ("description", "base", "metrics", "outputs", "inputs", "variants")
+STUDY_KEYS = ("description", "base", "metrics", "outputs", "columns", "inputs", "variants")
 
 
 def _flatten(d: Any, prefix: str = "") -> dict[str, Any]:
@@ -45,6 +47,17 @@ def _flatten(d: Any, prefix: str = "") -> dict[str, Any]:
             out.update(_flatten(v, f"{prefix}{k}."))
         return out
     return {prefix[:-1]: d}
+
+
+def metric_columns(metrics: Any, columns: list[str] | None) -> dict[str, Any]:
+    """The table cells of a metrics dict: the named ``columns`` (dotted paths into nested dicts), or
+    every top-level scalar when none are named."""
+    if not isinstance(metrics, dict):
+        return {}
+    flat = _flatten(metrics)
+    if columns:
+        return {c: flat.get(c) for c in columns}
+    return {k: v for k, v in metrics.items() if not isinstance(v, (dict, list))}
 
 
 def read_study(path: Path) -> dict[str, Any]:
@@ -105,7 +118,8 @@ def run_study(
                     raise PipelineErrors(errs)
                 sets = {**(inp.get("set") or {}), **(variant.get("set") or {})}
                 vars_ = {**(inp.get("vars") or {}), **(variant.get("vars") or {})}
-                graph = load_graph(base, sets=sets, vars=vars_, registry=registry, decl=decl)
+                graph = load_graph(base, sets=sets, vars=vars_, registry=registry, decl=decl,
+                                   base_dir=path.parent, source=str(path))
                 wanted = study.get("outputs")
                 if wanted:
                     graph.outputs = {k: v for k, v in graph.outputs.items() if k in wanted}
@@ -114,7 +128,7 @@ def run_study(
                 row["ran"] = sum(r.status == "ran" for r in run.results.values())
                 row["cached"] = sum(r.status == "cached" for r in run.results.values())
                 if metrics_name in graph.outputs:
-                    row.update(_flatten(run.output(metrics_name)))
+                    row.update(metric_columns(run.output(metrics_name), study.get("columns")))
             except TbhaError as e:
                 row["status"] = "failed"
                 row["error"] = e.format().splitlines()[0][:300]

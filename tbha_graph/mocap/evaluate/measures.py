@@ -193,3 +193,19 @@ def reprojection_errors(joints_world: np.ndarray, camera, points: np.ndarray, tr
     with np.errstate(divide="ignore", invalid="ignore"):
         proj = camera.project(j)
     return masked_distances(proj, points, np.asarray(tracked, dtype=bool) & front)
+
+
+def lag_frames(pred: np.ndarray, truth: np.ndarray, max_shift: int = 15) -> int:
+    """Delay of ``pred`` behind ``truth`` in frames (positive = late), both ``(n, J, 3)``: the shift that
+    maximises the correlation of their velocities, summed over joints and axes. NaN samples count as 0."""
+    vp = np.nan_to_num(np.diff(np.asarray(pred, dtype=np.float64), axis=0)).reshape(len(pred) - 1, -1)
+    vt = np.nan_to_num(np.diff(np.asarray(truth, dtype=np.float64), axis=0)).reshape(len(truth) - 1, -1)
+    n = vp.shape[0]
+    best, best_score = 0, -np.inf
+    for s in range(-min(max_shift, n - 1), min(max_shift, n - 1) + 1):
+        a = vp[max(s, 0) : n + min(s, 0)]
+        b = vt[max(-s, 0) : n - max(s, 0)]
+        score = float(np.sum(a * b)) / max(len(a), 1)
+        if score > best_score:
+            best, best_score = s, score
+    return best

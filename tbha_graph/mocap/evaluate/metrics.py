@@ -121,6 +121,7 @@ def truth_figures(joints: np.ndarray, fps: float, truth: dict, alignment: str) -
         "mpjpe_root_mm": _figure(m.nan_mean(err_root)),
         "pa_mpjpe_mm": _figure(m.nan_mean(err_pa)),
         "accel_error_m_s2": _figure(m.accel_error(aligned, gt, fps)),
+        "lag_ms": _figure(1000.0 * m.lag_frames(aligned, gt) / fps),
         "truth_jitter_m_s3": _figure(m.jitter(gt, fps)),
         "per_joint_mpjpe_mm": {name: _figure(v) for name, v in zip(JOINT_NAMES, per_joint)},
     }

@@ -19,7 +19,8 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from ...core.errors import NodeError
 from ...core.filehash import file_content_hash
-from ...core.node import InputPath, node
+from ...core.node import InputPath, node, optional
+from ...core.types import File
 from ..ports import VIDEO, VideoClip
 
 _OPEN_HINT = "check that the file is a video OpenCV can decode (e.g. .mp4 with mp4v/H.264, .avi with MJPG)"
@@ -28,7 +29,10 @@ _OPEN_HINT = "check that the file is a video OpenCV can decode (e.g. .mp4 with m
 class VideoParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
-    path: InputPath = Field(description="video file to read (relative paths: from the pipeline file's folder)")
+    path: InputPath | None = Field(
+        None, description="video file to read (relative paths: from the pipeline file's folder); "
+        "leave null when the 'file' input is connected (e.g. to a renderer)",
+    )
     start: int = Field(0, ge=0, description="first frame to use (inclusive)", json_schema_extra={"unit": "frame"})
     stop: int | None = Field(
         None, ge=1, description="frame to stop before (exclusive); None or beyond the end = to the end",
@@ -153,12 +157,24 @@ def iter_frames(clip: VideoClip, start: int | None = None, stop: int | None = No
         cap.release()
 
 
-@node("io.video", version=1, outputs={"video": VIDEO}, params=VideoParams)
-def video(ctx) -> dict:
+@node(
+    "io.video",
+    version=2,
+    inputs={"file": optional(File(kind="video"), "a video produced upstream (instead of the path param)")},
+    outputs={"video": VIDEO},
+    params=VideoParams,
+)
+def video(ctx, file) -> dict:
     """Open a video file: check it decodes and describe its frames (streamed later by consumers).
 
+    The file is the ``path`` param, or the ``file`` input when connected (a rendered video).
     Output ``video``: a VideoClip (absolute path, sha256 of the content, frame range [start, stop),
     fps, frame size in pixels after downscaling by ``scale``).
     """
     p: VideoParams = ctx.params
-    return {"video": probe_video(p.path, start=p.start, stop=p.stop, scale=p.scale, fps=p.fps)}
+    if (file is None) == (p.path is None):
+        raise NodeError(
+            "give the video either as the 'path' param or through the 'file' input, not both or neither",
+            hint=f"e.g. --set {ctx.node_id}.path=my_take.mp4",
+        )
+    return {"video": probe_video(file if file is not None else p.path, start=p.start, stop=p.stop, scale=p.scale, fps=p.fps)}
