@@ -164,6 +164,11 @@ def compute_metrics(
     metrics: dict = {"frames": int(n), "video_fps": _figure(float(np.asarray(tracks.get("fps", fps))))}
     quality, reproj = quality_figures(joints, fps, tracks, camera)
     metrics.update(quality)
+    if "inferred" in motion:  # samples filled by filter.fill_gaps; the rest of the untracked ones are missing
+        inferred = np.asarray(motion["inferred"], dtype=bool)
+        tracked3d = np.asarray(motion.get("tracked", tracks["tracked"]), dtype=bool)
+        metrics["inferred_pct"] = _figure(100.0 * inferred.mean())
+        metrics["missing_pct"] = _figure(100.0 * (~(tracked3d | inferred)).mean())
     nan = np.full(n, np.nan)
     errors = {"mpjpe_mm": nan, "mpjpe_root_mm": nan, "pa_mpjpe_mm": nan, "error_2d_px": nan, "reprojection_px": reproj,
               "fps": np.asarray(fps, dtype=np.float64)}

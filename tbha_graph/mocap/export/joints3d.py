@@ -6,7 +6,9 @@ Keys (all ``allow_pickle=False``-safe):
   rotations, i.e. exactly where the BVH puts every joint;
 * ``joints_solver`` ``(n_frames, 16, 3)`` metres: the 3D solver's (filtered) positions before the
   rotation fit, when ``motion`` is connected;
-* ``tracked`` ``(n_frames, 16)`` bool: the joint's patch was seen in that frame (False: predicted/inferred);
+* ``tracked`` ``(n_frames, 16)`` bool: the joint's patch was seen in that frame;
+* ``inferred`` ``(n_frames, 16)`` bool: not seen, filled by ``filter.fill_gaps`` (rigid torso or spline);
+  a joint neither tracked nor inferred is missing (its position is the solver's prediction);
 * ``joint_names`` ``(16,)`` str; ``fps`` (); ``K`` (3, 3), ``R`` (3, 3), ``t`` (3,) the calibrated camera
   (world -> camera, see :mod:`tbha_graph.mocap.camera`); ``width``, ``height`` ().
 """
@@ -46,4 +48,5 @@ def export_joints3d(ctx, rotations, camera, motion):
         out["joints_solver"] = np.asarray(motion["joints"], dtype=np.float64)
         if "tracked" in motion:
             out["tracked"] = np.asarray(motion["tracked"], dtype=bool)
+        out["inferred"] = np.asarray(motion.get("inferred", np.zeros((n, N_JOINTS), bool)), dtype=bool)
     return out
