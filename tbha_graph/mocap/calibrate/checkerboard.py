@@ -1,0 +1,136 @@
+"""``calibrate.checkerboard``: lens intrinsics from a checkerboard clip, as a studio does once per lens.
+
+Corners are found with ``cv2.findChessboardCorners`` + ``cv2.cornerSubPix`` on every ``step``-th frame of a
+video file (or every image of a folder, in name order); ``cv2.calibrateCamera`` then solves K and the
+distortion. The output camera's extrinsics are those of the **first view with a detected board**: world
+frame = that board, origin at its first inner corner, x along the rows of corners, y along the columns,
+z into the board (OpenCV's object-point convention), metres. Feed K (and dist) to ``calibrate.pnp`` to place
+the camera in the actor's world.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterator, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from ...core.errors import NodeError
+from ...core.node import InputPath, node
+from ...core.types import Json
+from ..camera import Camera
+from ..ports import CAMERA
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+
+
+class CheckerboardParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    path: InputPath = Field(description="video file, or a folder of images, showing the checkerboard in several poses")
+    columns: int = Field(9, ge=2, description="inner corners per row of the board")
+    rows: int = Field(6, ge=2, description="inner corners per column of the board")
+    square_size: float = Field(0.025, gt=0, description="side of one square", json_schema_extra={"unit": "m"})
+    step: int = Field(10, ge=1, description="use every step-th video frame")
+    max_views: int = Field(40, ge=3, description="at most this many views with a detected board are used (evenly spread)")
+    distortion: Literal["none", "k1k2", "full"] = Field("k1k2", description="distortion terms solved: none, k1 k2, or k1 k2 p1 p2 k3")
+
+
+def iter_images(path: Path, step: int) -> Iterator[tuple[int, np.ndarray]]:
+    """``(index, grey image (h, w) uint8)`` from a folder of images (name order) or every ``step``-th video frame."""
+    import cv2
+
+    if path.is_dir():
+        files = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+        if not files:
+            raise NodeError(f"{path}: the folder holds no images ({', '.join(IMAGE_SUFFIXES)})")
+        for i, f in enumerate(files):
+            img = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE)
+            if img is None:
+                raise NodeError(f"{f}: cannot read the image")
+            yield i, img
+        return
+    if not path.is_file():
+        raise NodeError(f"checkerboard clip {path} does not exist", hint="give a video file or a folder of images")
+    cap = cv2.VideoCapture(str(path))
+    if not cap.isOpened():
+        raise NodeError(f"{path}: OpenCV cannot open the video", hint="convert it to mp4 (mp4v/H.264) or extract images to a folder")
+    try:
+        i = 0
+        while True:
+            ok = cap.grab()
+            if not ok:
+                break
+            if i % step == 0:
+                ok, frame = cap.retrieve()
+                if ok:
+                    yield i, cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY) if frame.ndim == 3 else frame
+            i += 1
+    finally:
+        cap.release()
+
+
+def board_points(columns: int, rows: int, square: float) -> np.ndarray:
+    """Object points ``(columns * rows, 3)`` metres in OpenCV's corner order (row by row), z = 0."""
+    g = np.mgrid[0:columns, 0:rows].T.reshape(-1, 2)
+    return np.concatenate([g * square, np.zeros((len(g), 1))], axis=1).astype(np.float32)
+
+
+def find_corners(grey: np.ndarray, columns: int, rows: int) -> np.ndarray | None:
+    """Sub-pixel inner corners ``(columns * rows, 1, 2)`` float32, or None when the board is not found."""
+    import cv2
+
+    flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_FAST_CHECK
+    found, corners = cv2.findChessboardCorners(grey, (columns, rows), flags=flags)
+    if not found:
+        return None
+    criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-4)
+    return cv2.cornerSubPix(grey, corners, (5, 5), (-1, -1), criteria)
+
+
+@node("calibrate.checkerboard", version=1, inputs={}, outputs={"camera": CAMERA, "report": Json()}, params=CheckerboardParams)
+def checkerboard(ctx):
+    """Intrinsics K and distortion from a checkerboard clip (OpenCV), extrinsics of the first view."""
+    import cv2
+
+    p: CheckerboardParams = ctx.params
+    obj = board_points(p.columns, p.rows, p.square_size)
+    views: list[tuple[int, np.ndarray]] = []
+    size = None
+    n_seen = 0
+    for i, grey in ctx.progress(iter_images(Path(p.path), p.step), desc="checkerboard"):
+        n_seen += 1
+        if size is None:
+            size = (grey.shape[1], grey.shape[0])
+        elif (grey.shape[1], grey.shape[0]) != size:
+            raise NodeError(f"{p.path}: image {i} is {grey.shape[1]}x{grey.shape[0]}, the first was {size[0]}x{size[1]}")
+        corners = find_corners(grey, p.columns, p.rows)
+        if corners is not None:
+            views.append((i, corners))
+    if len(views) < 3:
+        raise NodeError(
+            f"{p.path}: the {p.columns}x{p.rows} board was found in {len(views)} of {n_seen} images; at least 3 are needed",
+            hint="check columns/rows (inner corners, not squares) and that the whole board is visible, in several tilted poses",
+        )
+    if len(views) > p.max_views:
+        keep = np.unique(np.linspace(0, len(views) - 1, p.max_views).round().astype(int))
+        views = [views[k] for k in keep]
+    flags = {
+        "none": cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K1 | cv2.CALIB_FIX_K2 | cv2.CALIB_FIX_K3,
+        "k1k2": cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K3,
+        "full": 0,
+    }[p.distortion]
+    rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(
+        [obj] * len(views), [c for _, c in views], size, None, None, flags=flags
+    )
+    dist5 = np.concatenate([np.ravel(dist), np.zeros(5)])[:5]
+    cam = Camera(K=K, R=cv2.Rodrigues(rvecs[0])[0], t=np.ravel(tvecs[0]), width=size[0], height=size[1], dist=dist5)
+    return {"camera": cam.to_model(), "report": {
+        "method": "checkerboard",
+        "rms_reprojection_px": float(rms),
+        "views_used": len(views),
+        "images_seen": n_seen,
+        "first_view_index": int(views[0][0]),
+        "fx_px": float(K[0, 0]), "fy_px": float(K[1, 1]), "cx_px": float(K[0, 2]), "cy_px": float(K[1, 2]),
+        "dist": dist5.tolist(),
+    }}

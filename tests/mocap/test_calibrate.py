@@ -1,0 +1,217 @@
+"""Calibration nodes: coplanar Tsai, PnP, camera files, checkerboard intrinsics."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from tbha_graph.core.errors import NodeError
+from tbha_graph.core.testing import run_node
+from tbha_graph.mocap.calibrate.checkerboard import checkerboard
+from tbha_graph.mocap.calibrate.known import known
+from tbha_graph.mocap.calibrate.pnp import pnp
+from tbha_graph.mocap.calibrate.tsai_coplanar import rotation_angle_deg, tsai_coplanar
+from tbha_graph.mocap.camera import Camera
+from tbha_graph.mocap.reconstruct.body import body_lengths, tpose_on_floor
+from tbha_graph.mocap.skeleton import JOINT_INDEX, JOINT_NAMES
+
+W, H = 640, 480
+REST = tpose_on_floor(body_lengths(None))  # the calibration world: T-pose on z = 0, floor y = 0
+
+
+def tracks_of(cam: Camera, joints: np.ndarray, n: int = 5, noise: float = 0.0, seed: int = 0) -> dict:
+    pts = np.repeat(cam.project(joints)[None], n, axis=0)
+    pts = pts + np.random.default_rng(seed).normal(0.0, noise, pts.shape)
+    return {"points": pts, "tracked": np.ones((n, 16), bool), "fps": np.array(30.0), "width": np.array(W), "height": np.array(H)}
+
+
+# eye, target, focal: actor left of the image centre, right of it, camera high, camera low looking down at the feet
+CAMERAS = {
+    "actor_left_of_centre": ((0.9, 1.4, 4.5), (0.6, 1.0, 0.0), 800.0),
+    "actor_right_of_centre": ((-0.6, 1.3, 4.8), (-0.5, 1.1, 0.0), 700.0),
+    "high_looking_down": ((-1.0, 2.4, 4.0), (0.2, 0.9, 0.0), 850.0),
+    "floor_above_axis": ((0.6, 0.25, 3.5), (0.2, -0.3, 0.0), 380.0),
+}
+
+
+@pytest.mark.parametrize("name", sorted(CAMERAS))
+def test_tsai_recovers_camera_from_exact_torso(name):
+    eye, target, f = CAMERAS[name]
+    cam = Camera.look_at(eye, target, focal_px=f, width=W, height=H)
+    out = run_node(tsai_coplanar, {}, tracks=tracks_of(cam, REST))
+    got = out["camera"].camera()
+    assert got.K[0, 0] == pytest.approx(f, rel=0.01)
+    assert rotation_angle_deg(got.R, cam.R) < 1e-3
+    assert np.allclose(got.t, cam.t, atol=1e-5)
+    # camera frame convention: the chest is in front of the camera and inside the image
+    chest = REST[JOINT_INDEX["chest"]]
+    assert got.to_camera(chest)[2] > 0 and got.in_image(got.project(chest))
+    assert out["report"]["reprojection_rms_px"] < 1e-6
+    assert out["report"]["camera_in_front_of_actor"]
+
+
+def test_tsai_ty_sign_both_ways():
+    signs = set()
+    for eye, target, f in CAMERAS.values():
+        cam = Camera.look_at(eye, target, focal_px=f, width=W, height=H)
+        signs.add(run_node(tsai_coplanar, {}, tracks=tracks_of(cam, REST))["report"]["ty_sign"])
+        assert np.sign(cam.t[1]) in signs
+    assert signs == {1, -1}
+
+
+def test_tsai_spine_through_image_centre_is_a_clear_error_and_more_joints_fix_it():
+    cam = Camera.look_at((0.0, 1.4, 4.5), (0.0, 1.0, 0.0), focal_px=800.0, width=W, height=H)
+    with pytest.raises(NodeError, match="singular") as e:
+        run_node(tsai_coplanar, {}, tracks=tracks_of(cam, REST))
+    assert "joints" in e.value.hint
+    out = run_node(tsai_coplanar, {"joints": list(JOINT_NAMES)}, tracks=tracks_of(cam, REST))
+    assert out["camera"].K[0][0] == pytest.approx(800.0, rel=0.01)
+
+
+def test_tsai_reports_sensitivity_and_known_focal_helps():
+    eye, target, f = CAMERAS["actor_left_of_centre"]
+    cam = Camera.look_at(eye, target, focal_px=f, width=W, height=H)
+    free = run_node(tsai_coplanar, {}, tracks=tracks_of(cam, REST))["report"]
+    many = run_node(tsai_coplanar, {"joints": list(JOINT_NAMES)}, tracks=tracks_of(cam, REST))["report"]
+    fixed = run_node(tsai_coplanar, {"focal_px": f}, tracks=tracks_of(cam, REST))["report"]
+    assert many["rotation_sd_deg_per_px"] < free["rotation_sd_deg_per_px"]
+    assert fixed["focal_sd_px_per_px"] == 0.0 and fixed["focal_px"] == f
+    assert "warning" in free  # a near-frontal torso is a weak calibration target: said, not hidden
+
+
+def test_tsai_refine_reduces_reprojection_error_on_noisy_points():
+    eye, target, f = CAMERAS["high_looking_down"]
+    cam = Camera.look_at(eye, target, focal_px=f, width=W, height=H)
+    tr = tracks_of(cam, REST, n=1, noise=0.7, seed=3)
+    joints = list(JOINT_NAMES)
+    raw = run_node(tsai_coplanar, {"joints": joints}, tracks=tr)["report"]
+    ref = run_node(tsai_coplanar, {"joints": joints, "refine": True}, tracks=tr)["report"]
+    assert ref["reprojection_rms_px"] <= raw["reprojection_rms_px"] + 1e-9
+
+
+def test_tsai_bad_joint_name_is_refused_with_suggestion():
+    with pytest.raises(Exception, match="did you mean 'chest'"):
+        tsai_coplanar.params.model_validate({"joints": ["neck", "chst", "hips", "left_shoulder", "right_shoulder"]})
+
+
+def test_tsai_needs_tracked_torso():
+    cam = Camera.look_at(*CAMERAS["actor_left_of_centre"][:2], focal_px=800.0, width=W, height=H)
+    tr = tracks_of(cam, REST)
+    tr["tracked"][:, JOINT_INDEX["neck"]] = False
+    with pytest.raises(NodeError, match="T-pose"):
+        run_node(tsai_coplanar, {}, tracks=tr)
+    del tr["width"]
+    with pytest.raises(NodeError, match="width"):
+        run_node(tsai_coplanar, {}, tracks=tr)
+
+
+@pytest.mark.parametrize("name", ["actor_left_of_centre", "high_looking_down"])
+def test_pnp_recovers_pose_and_agrees_with_tsai(name):
+    eye, target, f = CAMERAS[name]
+    cam = Camera.look_at(eye, target, focal_px=f, width=W, height=H)
+    tr = tracks_of(cam, REST)
+    got = run_node(pnp, {"focal_px": f}, tracks=tr)["camera"].camera()
+    assert rotation_angle_deg(got.R, cam.R) < 1e-4 and np.allclose(got.t, cam.t, atol=1e-5)
+    tsai = run_node(tsai_coplanar, {}, tracks=tr)["camera"].camera()
+    assert rotation_angle_deg(got.R, tsai.R) < 1e-3 and np.allclose(got.t, tsai.t, atol=1e-4)
+    # with 1 px noise on all 16 T-pose joints, PnP stays close (known focal)
+    noisy = run_node(pnp, {"focal_px": f, "joints": list(JOINT_NAMES)}, tracks=tracks_of(cam, REST, noise=1.0, n=1))
+    c = noisy["camera"].camera()
+    assert rotation_angle_deg(c.R, cam.R) < 2.0 and np.linalg.norm(c.center - cam.center) < 0.15
+
+
+def test_pnp_params_need_exactly_one_intrinsics():
+    with pytest.raises(Exception, match="exactly one"):
+        pnp.params.model_validate({})
+    with pytest.raises(Exception, match="exactly one"):
+        pnp.params.model_validate({"focal_px": 800, "K": [[800, 0, 320], [0, 800, 240], [0, 0, 1]]})
+
+
+def _camera_dict() -> dict:
+    cam = Camera.look_at((0.5, 1.5, 4.0), (0.0, 1.0, 0.0), focal_px=750.0, width=W, height=H)
+    return cam.to_dict()
+
+
+def test_known_reads_renderer_npz(tmp_path):
+    d = _camera_dict()
+    path = tmp_path / "ground_truth.npz"
+    np.savez(path, K=np.array(d["K"]), R=np.array(d["R"]), t=np.array(d["t"]), width=np.array(W), height=np.array(H),
+             joints=np.zeros((3, 16, 3)))
+    out = run_node(known, {"path": path})
+    assert np.allclose(out["camera"].K, d["K"]) and np.allclose(out["camera"].t, d["t"])
+    assert (out["camera"].width, out["camera"].height) == (W, H)
+
+
+@pytest.mark.parametrize("suffix", [".yaml", ".json"])
+def test_known_reads_yaml_and_json(tmp_path, suffix):
+    import yaml
+
+    d = _camera_dict()
+    d["dist"] = [0.01, -0.002, 0.0, 0.0]
+    path = tmp_path / f"cam{suffix}"
+    path.write_text(yaml.safe_dump({"camera": d}) if suffix == ".yaml" else json.dumps(d))
+    cam = run_node(known, {"path": path})["camera"]
+    assert np.allclose(cam.R, d["R"]) and cam.dist == [0.01, -0.002, 0.0, 0.0, 0.0]
+
+
+def test_known_errors_name_file_and_keys(tmp_path):
+    d = _camera_dict()
+    del d["t"], d["height"]
+    path = tmp_path / "cam.json"
+    path.write_text(json.dumps(d))
+    with pytest.raises(NodeError, match=r"cam\.json: missing key\(s\) t, height"):
+        run_node(known, {"path": path})
+    d = _camera_dict()
+    d["R"] = (2.0 * np.array(d["R"])).tolist()
+    path.write_text(json.dumps(d))
+    with pytest.raises(NodeError, match="not a rotation"):
+        run_node(known, {"path": path})
+    path.write_text("{not json")
+    with pytest.raises(NodeError, match=r"cam\.json:1:2: invalid JSON"):
+        run_node(known, {"path": path})
+
+
+def _render_board_views(folder, K, cols, rows, square, n_views, seed=0):
+    """Synthetic checkerboard photos: a board texture warped by the homography K [r1 r2 t]."""
+    import cv2
+    from scipy.spatial.transform import Rotation
+
+    px = 24  # texture pixels per square
+    tex = np.full(((rows + 3) * px, (cols + 3) * px), 255, np.uint8)
+    for r in range(rows + 1):
+        for c in range(cols + 1):
+            if (r + c) % 2 == 0:
+                tex[(r + 1) * px:(r + 2) * px, (c + 1) * px:(c + 2) * px] = 0
+    # board metres -> texture pixels: inner corner (0, 0) sits at texture ((2 px) - 0.5, (2 px) - 0.5)
+    S = np.array([[px / square, 0, 2 * px - 0.5], [0, px / square, 2 * px - 0.5], [0, 0, 1]])
+    centre = np.array([(cols - 1) * square / 2, (rows - 1) * square / 2, 0.0])
+    rng = np.random.default_rng(seed)
+    for i in range(n_views):
+        R = Rotation.from_euler("xyz", rng.uniform(-35, 35, 3), degrees=True).as_matrix()
+        t = np.array([rng.uniform(-0.08, 0.08), rng.uniform(-0.05, 0.05), rng.uniform(0.6, 0.85)]) - R @ centre
+        Hm = K @ np.column_stack([R[:, 0], R[:, 1], t]) @ np.linalg.inv(S)
+        img = cv2.warpPerspective(tex, Hm, (W, H), flags=cv2.INTER_LINEAR, borderValue=128)
+        cv2.imwrite(str(folder / f"view{i:02d}.png"), img)
+
+
+def test_checkerboard_focal_within_one_percent(tmp_path):
+    K = np.array([[720.0, 0, 319.5], [0, 720.0, 239.5], [0, 0, 1]])
+    _render_board_views(tmp_path, K, 9, 6, 0.03, 10)
+    (tmp_path / "notes.txt").write_text("not an image")
+    out = run_node(checkerboard, {"path": tmp_path, "columns": 9, "rows": 6, "square_size": 0.03})
+    rep = out["report"]
+    print(f"checkerboard: fx={rep['fx_px']:.2f} fy={rep['fy_px']:.2f} (true 720) rms={rep['rms_reprojection_px']:.3f} px")
+    assert rep["views_used"] == 10
+    assert rep["fx_px"] == pytest.approx(720.0, rel=0.01) and rep["fy_px"] == pytest.approx(720.0, rel=0.01)
+    assert rep["rms_reprojection_px"] < 0.5
+    # extrinsics of the first view: the board's first corner lies in front of the camera
+    assert out["camera"].camera().to_camera(np.zeros(3))[2] > 0.3
+
+
+def test_checkerboard_wrong_board_size_is_explained(tmp_path):
+    K = np.array([[720.0, 0, 319.5], [0, 720.0, 239.5], [0, 0, 1]])
+    _render_board_views(tmp_path, K, 9, 6, 0.03, 3)
+    with pytest.raises(NodeError, match="found in 0 of 3") as e:
+        run_node(checkerboard, {"path": tmp_path, "columns": 7, "rows": 5, "square_size": 0.03})
+    assert "inner corners" in e.value.hint
