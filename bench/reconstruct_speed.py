@@ -5,6 +5,9 @@ Prints ``name=value`` lines: frames per second of ``reconstruct.ray_sphere`` and
 for exact 2D and for 1 px Gaussian 2D noise.
 
     python bench/reconstruct_speed.py [--clip data/mocap/cmu/131_02.bvh] [--repeats 5]
+
+sequence_lsq's LSMR inner loop makes many small BLAS calls: on a busy machine multithreaded OpenBLAS slows
+it several-fold; compare with ``OPENBLAS_NUM_THREADS=1 python bench/reconstruct_speed.py``.
 """
 from __future__ import annotations
 

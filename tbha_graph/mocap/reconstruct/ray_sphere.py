@@ -28,6 +28,12 @@ around its already known neighbour (parent; the hips from the chest) with the bo
 Joints not tracked in a frame are reconstructed from their predicted 2D (the tracker fills ``points``) and
 marked ``tracked = False`` in the output. Frames are sequential only in the triangle's Gauss-Newton and in the
 two-root choice (a two-state scan); everything else is vectorised over frames.
+
+Measured limits (CMU 131_02, camera 4.5 m away, f = 800 px): exact on exact 2D with ``continuity="velocity"``;
+the seed's rule picks the mirror root whenever a limb crosses the plane perpendicular to its ray (the two
+roots meet there), tens of mm on exact 2D. The method has no redundancy: with 1 px of 2D noise, near-tangent
+limbs (legs seen from the front) and the near-frontal triangle move by decimetres and branches flip; use
+``reconstruct.sequence_lsq`` or smooth the 2D first.
 """
 from __future__ import annotations
 

@@ -1,18 +1,27 @@
 """``reconstruct.sequence_lsq``: 3D joints by least squares over windows of frames.
 
-Unknowns: every joint's position in the camera frame (metres) on every frame of a window. Residuals,
-each divided by its standard deviation so they are unit-free:
+Unknowns, per joint and frame of a window: normalised image coordinates ``(x, y)`` and depth ``Z`` (metres,
+camera frame; ``P = Z·(x, y, 1)``). Residuals, each divided by its standard deviation so they are unit-free:
 
-* reprojection: ``f·(X/Z − x̂)``, ``f·(Y/Z − ŷ)`` pixels against the (undistorted) 2D tracks, σ = ``sigma_px``;
+* reprojection: ``f·(x − x̂)``, ``f·(y − ŷ)`` pixels against the (undistorted) 2D tracks, σ = ``sigma_px``;
   joints not tracked in a frame (``tracked`` False, ``points`` a prediction) count ``untracked_weight`` times less;
 * bone lengths: ``|P_j − P_parent| − L_j`` metres, σ = ``sigma_bone``; the shoulder triangle's third side
   (shoulder to shoulder, measured on the first frame by ray_sphere) too;
-* smoothness: the second difference ``P[k+1] − 2 P[k] + P[k−1]`` metres, σ = ``sigma_accel``·dt² (an
-  acceleration in m/s², so the same value suits any frame rate).
+* smoothness: second differences over frames of ``(x, y)`` and of ``Z``, σ = ``sigma_accel``·dt² (an
+  acceleration in m/s², so the same value suits any frame rate; ``(x, y)`` use it divided by the window's
+  median depth). Penalising camera-frame positions instead would favour moving the body towards the
+  camera, where the same image motion is a smaller 3D motion.
 
-Solved with ``scipy.optimize.least_squares`` (``trf``) and an analytic sparse Jacobian (each residual touches
-at most 9 unknowns). Initialised from ``reconstruct.ray_sphere``'s solution (same first-frame rule and
-``continuity`` param); windows of ``window`` frames overlap by ``overlap`` frames and are cross-faded there.
+Solved with ``scipy.optimize.least_squares`` (``trf``, LSMR subproblems) and an analytic sparse Jacobian
+(each residual touches at most 6 unknowns). Start: ``reconstruct.ray_sphere``'s solution (same first-frame
+rule, ``continuity`` param), computed on the raw 2D and on 2D smoothed over time (``init_smoothing``); each
+window is solved from every start and the lowest final cost wins. Windows of ``window`` frames overlap by
+``overlap`` frames (the next window starts from the previous one's solution there) and are cross-faded.
+
+Limits (measured, see the report to the lead): single-view depth with only bone lengths has no redundancy
+per frame, so the smoothness prior does the work; with 1 px noise expect decimetre MPJPE, not centimetres.
+The LSMR inner loop is made of many small BLAS calls: run with ``OPENBLAS_NUM_THREADS=1`` on a busy machine
+(about 7x faster here).
 """
 from __future__ import annotations
 
