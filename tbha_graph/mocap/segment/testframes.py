@@ -11,16 +11,22 @@ import cv2
 import numpy as np
 
 from ..camera import Camera
-from ..skeleton import BONES, JOINT_INDEX, JOINT_NAMES, PATCHED_JOINTS, tpose
+from ..skeleton import BONES, JOINT_INDEX, JOINT_NAMES, PATCHED_JOINTS, bone_lengths_array, tpose
 from ..suit import SuitSpec, load_suit
 
 _SHIFT = 4  # cv2 drawing with 1/16 px precision
 
 
+#: Spread-out proportions for drawn test frames, so that no two drawn discs overlap (the real body's
+#: neck and head joints are closer than a patch's diameter at this distance).
+TEST_BONES = {"neck": 0.22, "head": 0.15, "left_shoulder": 0.21, "right_shoulder": 0.21, "left_hip": 0.14, "right_hip": 0.14,
+              "left_elbow": 0.28, "right_elbow": 0.28, "left_wrist": 0.25, "right_wrist": 0.25}
+
+
 def tpose_points(width: int = 640, height: int = 480, distance: float = 3.2, focal_px: float = 520.0) -> np.ndarray:
-    """The rest T-pose seen from the front: joint pixels ``(16, 2)``."""
+    """The rest T-pose seen from the front: joint pixels ``(16, 2)`` (proportions :data:`TEST_BONES`)."""
     cam = Camera.look_at((0.0, 0.9, distance), (0.0, 0.9, 0.0), focal_px=focal_px, width=width, height=height)
-    return cam.project(tpose())
+    return cam.project(tpose(bone_lengths_array(TEST_BONES)))
 
 
 def _pt(p) -> tuple[int, int]:
