@@ -13,6 +13,7 @@ the same values), so frame ``i`` of the truth stays frame ``i`` of the motion.
 from __future__ import annotations
 
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -57,13 +58,17 @@ class GroundTruthParams(BaseModel):
         return self
 
 
+#: what reading a damaged .npz raises (zip structure, deflate stream, .npy header, truncation)
+_DAMAGED = (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError, RuntimeError)
+
+
 def _read_npz(path: Path) -> dict[str, np.ndarray]:
     if not path.is_file():
         raise NodeError(f"ground truth {path} does not exist",
                         hint="check the path (relative paths are resolved from the pipeline file's folder), or set path to null")
     try:
         z = np.load(path, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as e:
+    except _DAMAGED as e:
         raise NodeError(f"ground truth {path} cannot be read as an .npz without pickle: {e}",
                         hint="use the ground_truth.npz written by synth.render_suit_video") from None
     if not isinstance(z, np.lib.npyio.NpzFile):
@@ -72,7 +77,7 @@ def _read_npz(path: Path) -> dict[str, np.ndarray]:
     try:
         with z:
             return {k: z[k] for k in z.files}
-    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as e:
+    except _DAMAGED as e:
         raise NodeError(f"ground truth {path}: an array cannot be read without pickle: {e}",
                         hint="use the ground_truth.npz written by synth.render_suit_video") from None
 
