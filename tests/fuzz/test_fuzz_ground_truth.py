@@ -78,9 +78,21 @@ def _retyped(raw: bytes, member: bytes, old: bytes, new: bytes) -> bytes:
 
 
 # Cases the fuzzer found (kept as explicit examples): BadZipFile, zlib.error, NotImplementedError
-# ("compression method not supported") and RuntimeError ("encrypted") escaped as bare exceptions. The
-# last two check that a damaged .npy header is refused (the zip CRC or the shape check catches it).
+# ("compression method not supported") and RuntimeError ("encrypted") escaped as bare exceptions; and
+# numpy reads only the bytes a .npy header asks for, so with a member larger than zipfile's 4 kB read
+# chunk a damaged header declaring a smaller dtype was read without the zip's CRC check: the whole
+# joints3d_world came back as garbage, silently (found by reasoning from a fuzz case in which damaged
+# zip structure renamed members; shown on the full-size file).
+def _full_stored() -> bytes:
+    buf = io.BytesIO()
+    with np.load(SAMPLE, allow_pickle=False) as z:
+        np.savez(buf, **{k: z[k] for k in z.files})
+    return buf.getvalue()
+
+
 FOUND = [
+    case(_retyped(_full_stored(), b"joints3d_world.npy", b"<f8", b"<f4"),
+         "all 210 frames, stored: '<f4' in the header of an 80 kB '<f8' member (read silently as garbage)"),
     case(BASES["stored"][: len(BASES["stored"]) // 2], "stored npz cut in half (no central directory)"),
     case(BASES["deflated"][:200] + bytes(64) + BASES["deflated"][264:], "zeroed bytes inside deflated data"),
     case(_retyped(BASES["stored"], b"height.npy", b"<i8", b"<i1"), "a smaller dtype in a .npy header"),

@@ -76,6 +76,12 @@ def _read_npz(path: Path) -> dict[str, np.ndarray]:
                         hint="use the ground_truth.npz written by synth.render_suit_video")
     try:
         with z:
+            # numpy reads only the bytes a .npy header asks for, so the zip's CRC-32 is not checked when a
+            # damaged header declares a smaller dtype or shape than the member holds: check every member
+            damaged = z.zip.testzip()
+            if damaged is not None:
+                raise NodeError(f"ground truth {path}: {damaged} is damaged (its CRC-32 does not match)",
+                                hint="use an intact copy of the ground_truth.npz written by synth.render_suit_video")
             return {k: z[k] for k in z.files}
     except _DAMAGED as e:
         raise NodeError(f"ground truth {path}: an array cannot be read without pickle: {e}",
