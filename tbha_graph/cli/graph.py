@@ -17,7 +17,6 @@ import sys
 from pathlib import Path
 
 from ..core.cache import Cache
-from ..core.errors import RegistryError
 from ..core.progress import Reporter
 from ..core.registry import default_registry, load_plugin_modules
 from ..core.runner import load_graph

@@ -6,7 +6,6 @@ invalidates the entry. The hash itself is always of the content, so moving or co
 from __future__ import annotations
 
 import json
-import os
 import threading
 from pathlib import Path
 

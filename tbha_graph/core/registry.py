@@ -11,7 +11,6 @@ from __future__ import annotations
 import importlib
 import importlib.metadata as md
 import pkgutil
-import sys
 import threading
 from dataclasses import dataclass
 from types import ModuleType

@@ -15,12 +15,11 @@ from pathlib import Path
 from typing import Any
 
 from .cache import Cache, CorruptEntry, Entry
-from .errors import NodeError, NodeFailed, PortTypeError, TbhaError
+from .errors import NodeFailed, PortTypeError, TbhaError
 from .graph import BoundNode, Graph
 from .keys import node_key
 from .node import Context
 from .progress import QUIET, Reporter
-from .types import concrete_type_of
 
 
 @dataclass

@@ -348,9 +348,13 @@ def ray_sphere(ctx, tracks, camera, body):
     check_image_size(tr, cam)
     lengths = body_lengths(body)
     P, stats = solve_ray_sphere(tr.points, cam, lengths, p.plane_z, p.continuity, p.gn_iterations)
-    motion = {"joints": cam.to_world(P), "fps": np.asarray(tr.fps, dtype=np.float64), "tracked": tr.tracked.copy(),
-              "joint_names": np.array(JOINT_NAMES)}
-    return {"motion": motion, "report": stats.as_report()}
+    return {"motion": motion_bundle(P, cam, tr), "report": stats.as_report()}
+
+
+def motion_bundle(P: np.ndarray, cam: Camera, tr) -> dict:
+    """The MOTION bundle of camera-frame joints ``P`` (n, 16, 3): world frame, the tracks' fps and flags."""
+    return {"joints": cam.to_world(P), "fps": np.asarray(tr.fps, dtype=np.float64), "tracked": tr.tracked.copy(),
+            "joint_names": np.array(JOINT_NAMES)}
 
 
 def check_image_size(tr, cam: Camera) -> None:

@@ -37,7 +37,7 @@ from ..camera import Camera
 from ..ports import CAMERA, MOTION, TRACKS2D
 from ..skeleton import JOINT_INDEX, JOINT_NAMES, N_JOINTS, PARENTS
 from .body import body_lengths, tpose_on_floor
-from .ray_sphere import bone_between, check_image_size, ray_directions
+from .ray_sphere import bone_between, check_image_size, motion_bundle, ray_directions
 
 TORSO = tuple(JOINT_INDEX[n] for n in ("hips", "chest", "neck", "left_shoulder", "right_shoulder", "left_hip", "right_hip"))
 #: hinge joints: (joint, sign of (inside-of-bend · body forward) that is anatomically natural)
@@ -179,6 +179,4 @@ def temporal_ray_sphere(ctx, tracks, camera, body):
     if tr.fps is None or not np.isfinite(tr.fps) or tr.fps <= 0:
         raise NodeError("the tracks have no frame rate", hint="the tracking node must give 'fps'")
     P, report = solve_temporal(tr.points, cam, body_lengths(body), float(tr.fps), p)
-    motion = {"joints": cam.to_world(P), "fps": np.asarray(tr.fps, dtype=np.float64), "tracked": tr.tracked.copy(),
-              "joint_names": np.array(JOINT_NAMES)}
-    return {"motion": motion, "report": report}
+    return {"motion": motion_bundle(P, cam, tr), "report": report}
