@@ -281,7 +281,7 @@ class Json(PortType):
             raise PortTypeError(f"{where}: value is not JSON-serialisable: {e}") from None
 
     def save(self, value: Any, path: Path) -> None:
-        path.write_text(json.dumps(value, indent=2, sort_keys=True, default=_json_default))
+        path.write_text(json.dumps(value, indent=2, default=_json_default))  # key order kept (hashing is canonical)
 
     def load(self, path: Path) -> Any:
         return json.loads(path.read_text())

@@ -242,7 +242,7 @@ def test_dask_executor_matches_local_and_runs_independent_nodes_in_parallel(writ
     g = load_graph(p, registry=reg)
     local = run_graph(g, cache=False).output("sum.npz")
     log.unlink()
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, Client(cluster) as client:
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster, Client(cluster) as client:
         client.run(lambda: __import__("testnodes") and __import__("tbha_graph.core.scheduler"))  # warm workers
         results = run_dask(g, ["sum"], Cache(tmp_path / "c"), QUIET, client=client)
     assert {k: r.status for k, r in results.items()} == {"src": "ran", "a": "ran", "b": "ran", "sum": "ran"}

@@ -36,7 +36,7 @@ def client_for(scheduler: str | None = None, workers: int | None = None):
             return Client(scheduler, timeout="10s"), None
         except OSError as e:
             raise TbhaError(f"cannot connect to the Dask scheduler at {scheduler}: {e}", hint="start it with `dask scheduler` or drop --scheduler to use a local cluster") from None
-    cluster = LocalCluster(n_workers=workers or 2, threads_per_worker=1, processes=True, dashboard_address=None)
+    cluster = LocalCluster(n_workers=workers or 2, threads_per_worker=1, processes=True, dashboard_address=":0")
     return Client(cluster), cluster
 
 
