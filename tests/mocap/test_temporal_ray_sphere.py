@@ -53,3 +53,34 @@ def test_sign_choice_follows_smooth_motion_through_tangency():
     cost = np.zeros((t.size, 2))
     cost[:, 0] = 1.0
     assert (choose_signs(away, cost, 10.0) == -1).all()
+
+
+def test_pinned_side_changes_only_the_pinned_frames_and_draws_a_timeline(truth, tmp_path):
+    from tbha_graph.mocap.skeleton import JOINT_INDEX
+    from tbha_graph.mocap.viz.depth_sides import depth_sides
+
+    cam = Camera(truth["K"], truth["R"], truth["t"], int(truth["width"]), int(truth["height"]))
+    n = truth["joints2d"].shape[0]
+    tracks = {"points": truth["joints2d"], "tracked": np.ones((n, 16), bool), "fps": np.array(30.0),
+              "width": np.array(cam.width), "height": np.array(cam.height)}
+    args = dict(tracks=tracks, camera=cam.to_model(), body=lengths_to_body(truth["bone_lengths"]))
+    free = run_node(temporal_ray_sphere, {}, **args)
+    j = JOINT_INDEX["left_wrist"]
+    chosen = free["sides"]["sides"][100:121, j]
+    flip = "front" if chosen[0] > 0 else "back"  # the other side than the solver chose at frame 100
+    pinned = run_node(temporal_ray_sphere, {"overrides": [{"joint": "left_wrist", "frames": [100, 120], "side": flip}]}, **args)
+    want = -1 if flip == "front" else 1
+    assert (pinned["sides"]["sides"][100:121, j] == want).all()
+    moved = np.linalg.norm(pinned["motion"]["joints"] - free["motion"]["joints"], axis=-1)  # (n, 16)
+    outside = np.ones(n, bool)
+    outside[100:121] = False
+    assert moved[outside].max() < 1e-9  # nothing else changes
+    assert moved[100:121, j].max() > 0.01
+    png = run_node(depth_sides, {}, sides=pinned["sides"])["png"]
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_bad_pin_is_refused_with_the_joint_names():
+    with pytest.raises(Exception) as ei:
+        run_node(temporal_ray_sphere, {"overrides": [{"joint": "left_wirst", "frames": [1, 2], "side": "front"}]})
+    assert "did you mean 'left_wrist'" in str(ei.value)

@@ -19,6 +19,11 @@ neighbour), but the two quantities the seed solves frame by frame are estimated 
    knees and elbows (a knee does not bend forward, an elbow not backward), instead of the seed's
    frame-to-frame nearest-root rule.
 
+**Depth-flip timeline.** Output ``sides`` holds the side chosen per (frame, joint) (``viz.depth_sides`` draws
+it as a PNG strip); param ``overrides`` pins a joint's side over a frame range where the solver chose
+wrong (``[{joint: left_elbow, frames: [120, 180], side: front}]``): only those frames of that joint (and
+the joints hanging from it) change, and only this node and those downstream run again.
+
 Output: joints in the world frame (metres) with ``tracked`` from the tracks; ``report`` counts the frames
 where ``D < 0`` (bone too short for what the image shows: the point of the ray nearest the sphere is
 taken) and the sign flips per joint. Vectorised over frames except the Viterbi scan (4 states per frame)
@@ -27,11 +32,13 @@ and the per-frame PnP.
 from __future__ import annotations
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from ...core.errors import NodeError
 from ...core.node import node
-from ...core.types import Json
+from ...core.types import Array, Arrays, Json
 from ..calibrate.observations import read_tracks
 from ..camera import Camera
 from ..ports import CAMERA, MOTION, TRACKS2D
@@ -45,12 +52,42 @@ HINGES = {JOINT_INDEX["left_knee"]: -1.0, JOINT_INDEX["right_knee"]: -1.0,
           JOINT_INDEX["left_elbow"]: 1.0, JOINT_INDEX["right_elbow"]: 1.0}
 
 
+class SidePin(BaseModel):
+    """Pin the depth side of one joint over a frame range (both ends included)."""
+
+    model_config = ConfigDict(extra="forbid")
+    joint: str = Field(description="joint whose side is pinned (a limb or head joint)")
+    frames: tuple[int, int] = Field(description="first and last frame, inclusive")
+    side: Literal["front", "back"] = Field(description="front: nearer the camera than its parent joint; back: farther")
+
+    @field_validator("joint")
+    @classmethod
+    def _known(cls, v: str) -> str:
+        if v not in JOINT_INDEX or JOINT_INDEX[v] in TORSO:
+            from ...core.errors import did_you_mean
+
+            limbs = [n for n in JOINT_NAMES if JOINT_INDEX[n] not in TORSO]
+            raise ValueError(f"{v!r} is not a limb or head joint{did_you_mean(v, limbs)}; pinnable: {', '.join(limbs)}")
+        return v
+
+    @model_validator(mode="after")
+    def _range(self) -> "SidePin":
+        if not 0 <= self.frames[0] <= self.frames[1]:
+            raise ValueError(f"frames {list(self.frames)} must be [first, last] with 0 <= first <= last")
+        return self
+
+
 class TemporalRaySphereParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     torso_cutoff: float = Field(3.0, gt=0, description="low-pass cutoff of the torso pose over time", json_schema_extra={"unit": "Hz"})
     limb_cutoff: float = Field(4.0, gt=0, description="low-pass cutoff of each limb's squared depth offset D", json_schema_extra={"unit": "Hz"})
     hinge_weight: float = Field(1.0, ge=0, description="weight of the knee/elbow bending-direction cost against smoothness")
+    overrides: list[SidePin] = Field(
+        default_factory=list,
+        description="pin a joint's depth side over frames, e.g. [{joint: left_elbow, frames: [120, 180], side: front}]; "
+        "the solver's own choice is kept everywhere else",
+    )
 
 
 def lowpass(x: np.ndarray, fps: float, cutoff: float) -> np.ndarray:
@@ -120,8 +157,9 @@ def choose_signs(s_abs: np.ndarray, hinge_cost: np.ndarray | None, weight: float
     return signs[idx]
 
 
-def solve_temporal(pixels: np.ndarray, cam: Camera, lengths: np.ndarray, fps: float, p: TemporalRaySphereParams) -> tuple[np.ndarray, dict]:
-    """Joints ``(n, 16, 3)`` camera frame (metres) and a report; see the module docstring."""
+def solve_temporal(pixels: np.ndarray, cam: Camera, lengths: np.ndarray, fps: float, p: TemporalRaySphereParams) -> tuple[np.ndarray, dict, np.ndarray]:
+    """Joints ``(n, 16, 3)`` camera frame (metres), a report, and the depth side chosen per (frame, joint)
+    ``(n, 16)`` int8 (-1 nearer the camera than the parent, +1 farther, 0 torso); see the module docstring."""
     d = ray_directions(cam, pixels)  # z = 1
     u = d / np.linalg.norm(d, axis=-1, keepdims=True)
     n = pixels.shape[0]
@@ -133,6 +171,7 @@ def solve_temporal(pixels: np.ndarray, cam: Camera, lengths: np.ndarray, fps: fl
     forward /= np.linalg.norm(forward, axis=1, keepdims=True)  # actor's forward, camera frame (left x up)
     known = set(TORSO)
     report: dict = {"frames": n}
+    sides = np.zeros((n, N_JOINTS), dtype=np.int8)
     order = [j for j in range(N_JOINTS) if j not in known]
     while order:
         for j in list(order):
@@ -155,19 +194,28 @@ def solve_temporal(pixels: np.ndarray, cam: Camera, lengths: np.ndarray, fps: fl
                     cost[:, col] = np.clip(-HINGES[a] * np.einsum("ij,ij->i", inside, forward), 0.0, None) ** 2
                 hinge = cost * (L * L)
             sign = choose_signs(s_abs, hinge, p.hinge_weight)
+            for pin in p.overrides:
+                if JOINT_INDEX[pin.joint] == j:  # the user's word wins on the pinned frames only
+                    sign[pin.frames[0] : pin.frames[1] + 1] = -1.0 if pin.side == "front" else 1.0
+            sides[:, j] = sign.astype(np.int8)
             P[:, j] = (uc + sign * s_abs)[:, None] * u[:, j]
             report[f"no_root_{JOINT_NAMES[j]}"] = int(np.count_nonzero(Ds < 0))
             report[f"flips_{JOINT_NAMES[j]}"] = int(np.count_nonzero(np.diff(sign) != 0))
             known.add(j)
             order.remove(j)
-    return P, report
+    return P, report, sides
 
 
 @node(
     "reconstruct.temporal_ray_sphere",
     version=1,
     inputs={"tracks": TRACKS2D, "camera": CAMERA, "body": Json(doc="bone lengths {joint: metres}")},
-    outputs={"motion": MOTION, "report": Json(doc="no-root frames and depth-sign flips per joint")},
+    outputs={
+        "motion": MOTION,
+        "report": Json(doc="no-root frames and depth-sign flips per joint"),
+        "sides": Arrays({"sides": Array("int", ("n_frames", N_JOINTS))},
+                        doc="depth side per (frame, joint): -1 front of its parent, +1 behind, 0 torso"),
+    },
     params=TemporalRaySphereParams,
 )
 def temporal_ray_sphere(ctx, tracks, camera, body):
@@ -178,5 +226,10 @@ def temporal_ray_sphere(ctx, tracks, camera, body):
     check_image_size(tr, cam)
     if tr.fps is None or not np.isfinite(tr.fps) or tr.fps <= 0:
         raise NodeError("the tracks have no frame rate", hint="the tracking node must give 'fps'")
-    P, report = solve_temporal(tr.points, cam, body_lengths(body), float(tr.fps), p)
-    return {"motion": motion_bundle(P, cam, tr), "report": report}
+    n = tr.points.shape[0]
+    late = [pin for pin in p.overrides if pin.frames[1] >= n]
+    if late:
+        raise NodeError(f"override {late[0].model_dump()} reaches frame {late[0].frames[1]} but the take has {n} frames (0-{n - 1})")
+    P, report, sides = solve_temporal(tr.points, cam, body_lengths(body), float(tr.fps), p)
+    return {"motion": motion_bundle(P, cam, tr), "report": report,
+            "sides": {"sides": sides, "joint_names": np.array(JOINT_NAMES), "fps": np.asarray(tr.fps, dtype=np.float64)}}
