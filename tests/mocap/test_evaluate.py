@@ -223,3 +223,10 @@ def test_ground_truth_node_reads_slices_and_refuses_bad_files(scene, tmp_path):
         run_node(ground_truth, params={"path": str(junk)})
     with pytest.raises(NodeError, match="does not exist"):
         run_node(ground_truth, params={"path": str(tmp_path / "missing.npz")})
+
+
+def test_extra_reports_join_the_metrics_without_overwriting(scene):
+    out = run_node(metrics, {}, motion=motion(scene["joints"]), tracks=scene["tracks"], camera=scene["camera"].to_model(),
+                   truth=scene["truth"], extra={"foot_sliding_after_mm": 0.2, "frames": -1, "per_joint": {"a": 1}})
+    res = out["metrics"]
+    assert res["foot_sliding_after_mm"] == 0.2 and res["frames"] == N and "per_joint" not in res

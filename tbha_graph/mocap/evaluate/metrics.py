@@ -43,7 +43,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.errors import NodeError
 from ...core.node import node, optional
-from ...core.types import Array, Arrays
+from ...core.types import Array, Arrays, Json
 from ..io.ground_truth import TRUTH, check_ground_truth, truth_joints2d, truth_visibility
 from ..ports import CAMERA, METRICS, MOTION, TRACKS2D
 from ..skeleton import JOINT_NAMES, N_JOINTS, PATCHED_JOINTS
@@ -204,18 +204,20 @@ def compute_metrics(
 
 @node(
     "evaluate.metrics",
-    version=1,
+    version=2,
     inputs={
         "motion": MOTION,
         "tracks": TRACKS2D,
         "camera": CAMERA,
         "truth": optional(TRUTH, "ground truth (io.ground_truth); {} or unconnected = none"),
         "raw_motion": optional(MOTION, "the motion before filtering, to report what the filter changed"),
+        "extra": optional(Json(), "figures from other nodes' reports (e.g. filter.foot_contact's foot sliding), "
+                                  "merged into metrics: their top-level numbers and strings"),
     },
     outputs={"metrics": METRICS, "errors": ERRORS},
     params=MetricsParams,
 )
-def metrics(ctx, motion, tracks, camera, truth, raw_motion):
+def metrics(ctx, motion, tracks, camera, truth, raw_motion, extra):
     """Quality figures of a capture (reprojection, bone-length stability, jitter) and, with ground
     truth, its accuracy (MPJPE, PA-MPJPE, 2D error, acceleration error); per-frame errors for plots.
 
@@ -223,4 +225,6 @@ def metrics(ctx, motion, tracks, camera, truth, raw_motion):
     ``per_joint_mpjpe_mm``. Output ``errors``: per-frame arrays (see tbha_graph.mocap.evaluate.metrics).
     """
     result, errors = compute_metrics(motion, tracks, camera.camera(), truth, raw_motion, ctx.params.alignment)
+    if isinstance(extra, dict):
+        result.update({k: v for k, v in extra.items() if isinstance(v, (int, float, str, bool)) and k not in result})
     return {"metrics": result, "errors": errors}
