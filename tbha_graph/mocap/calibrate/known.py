@@ -12,6 +12,8 @@ Conventions are those of :mod:`tbha_graph.mocap.camera` (Xc = R Xw + t, camera x
 from __future__ import annotations
 
 import json
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -33,31 +35,50 @@ class KnownParams(BaseModel):
     rotation_tolerance: float = Field(1e-4, gt=0, le=0.1, description="largest allowed |R R^T - I| entry")
 
 
+#: what reading a damaged .npz raises (zip structure, deflate stream, .npy header, truncation)
+_DAMAGED_NPZ = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError, RuntimeError)
+
+
+def _numbers_only(x) -> bool:
+    """A number or nested lists of numbers, written as numbers (not true/false, not "1.5")."""
+    if isinstance(x, list):
+        return all(_numbers_only(v) for v in x)
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
 def _read_mapping(path: Path) -> dict:
     suffix = path.suffix.lower()
     if suffix == ".npz":
         try:
             with np.load(path, allow_pickle=False) as z:
+                damaged = z.zip.testzip()  # numpy alone skips the CRC check of members it reads partly
+                if damaged is not None:
+                    raise NodeError(f"{path}: {damaged} is damaged (its CRC-32 does not match)")
                 return {k: z[k] for k in z.files if k in REQUIRED + ("dist",)}
-        except (OSError, ValueError) as e:
+        except _DAMAGED_NPZ as e:
             raise NodeError(f"{path}: cannot read as .npz: {e}") from None
-    text = path.read_text(encoding="utf-8")
+    if suffix in (".yaml", ".yml"):
+        from ...core.yamlfile import load_yaml
+
+        data, problems = load_yaml(path)  # safe loading; bad bytes, syntax errors, duplicate keys with their line
+        if problems:
+            raise NodeError(f"{path}: invalid YAML: {problems[0].message}", location=problems[0].location)
+        return _camera_mapping(path, data)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
+        raise NodeError(f"{path}: not UTF-8 text (byte {e.start}: {e.object[e.start]:#04x})") from None
     if suffix == ".json":
         try:
             data = json.loads(text)
         except json.JSONDecodeError as e:
             raise NodeError(f"{path}:{e.lineno}:{e.colno}: invalid JSON: {e.msg}") from None
-    elif suffix in (".yaml", ".yml"):
-        import yaml
-
-        try:
-            data = yaml.safe_load(text)
-        except yaml.YAMLError as e:
-            mark = getattr(e, "problem_mark", None)
-            where = f"{path}:{mark.line + 1}:{mark.column + 1}" if mark else str(path)
-            raise NodeError(f"{where}: invalid YAML: {getattr(e, 'problem', e)}") from None
     else:
         raise NodeError(f"{path}: unknown camera file type {suffix!r}", hint="use .yaml, .yml, .json or .npz")
+    return _camera_mapping(path, data)
+
+
+def _camera_mapping(path: Path, data) -> dict:
     if isinstance(data, dict) and isinstance(data.get("camera"), dict):
         data = data["camera"]
     if not isinstance(data, dict):
@@ -73,15 +94,19 @@ def read_camera_file(path: Path, rotation_tolerance: float = 1e-4) -> Camera:
     data = _read_mapping(path)
     missing = [k for k in REQUIRED if k not in data]
     if missing:
-        raise NodeError(f"{path}: missing key(s) {', '.join(missing)} (present: {', '.join(sorted(data)) or 'none'})",
+        raise NodeError(f"{path}: missing key(s) {', '.join(missing)} (present: {', '.join(sorted(map(str, data))) or 'none'})",
                         hint=f"a camera file needs {', '.join(REQUIRED)} and optionally dist")
     shapes = {"K": (3, 3), "R": (3, 3), "t": (3,), "width": (), "height": (), "dist": (5,)}
     arrays = {}
     for key, shape in shapes.items():
         if key not in data:
             continue
+        value = data[key]
+        numeric = value.dtype.kind in "iuf" if isinstance(value, np.ndarray) else _numbers_only(value)
+        if not numeric:  # numpy would quietly take true as 1 and "800" as 800.0
+            raise NodeError(f"{path}: key {key!r} is not numeric: {value!r}")
         try:
-            a = np.asarray(data[key], dtype=np.float64)
+            a = np.asarray(value, dtype=np.float64)
         except (TypeError, ValueError):
             raise NodeError(f"{path}: key {key!r} is not numeric: {data[key]!r}") from None
         if key == "t" and a.shape in ((3, 1), (1, 3)):
@@ -106,6 +131,8 @@ def read_camera_file(path: Path, rotation_tolerance: float = 1e-4) -> Camera:
     if K[0, 0] <= 0 or K[1, 1] <= 0 or abs(K[2, 2] - 1.0) > 1e-9:
         raise NodeError(f"{path}: K is not an intrinsics matrix (fx, fy > 0, K[2][2] = 1): {K.tolist()}")
     width, height = int(arrays["width"]), int(arrays["height"])
+    if width != arrays["width"] or height != arrays["height"]:
+        raise NodeError(f"{path}: image size {arrays['width']:g}x{arrays['height']:g} is not a whole number of pixels")
     if width <= 0 or height <= 0:
         raise NodeError(f"{path}: image size {width}x{height} is not positive")
     return Camera(K=K, R=R, t=arrays["t"], width=width, height=height, dist=arrays.get("dist", np.zeros(5)))

@@ -38,7 +38,8 @@ def body_lengths(body: Mapping[str, float] | None, where: str = "body") -> np.nd
     body = dict(body or {})
     check_bone_names(body, where)
     for name, value in body.items():
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
+        # float(): a huge YAML integer (10**40) is a Python int numpy cannot take, 10**400 no float at all
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(float(value) if abs(value) < 1e300 else np.inf) or value <= 0:
             raise NodeError(f"{where}: bone {name!r} has length {value!r}", hint="give a positive length in metres")
     return bone_lengths_array(body)
 

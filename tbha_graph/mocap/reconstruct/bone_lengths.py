@@ -53,15 +53,22 @@ def read_measurements(path: Path) -> dict[str, float]:
     path = Path(path)
     if not path.is_file():
         raise NodeError(f"bone length file {path} does not exist", hint="check the path (relative to the pipeline file)")
-    text = path.read_text(encoding="utf-8")
-    try:
-        if path.suffix.lower() == ".json":
-            data = json.loads(text)
-        else:
-            import yaml
+    if path.suffix.lower() != ".json":
+        from ...core.yamlfile import load_yaml
 
-            data = yaml.safe_load(text)
-    except Exception as e:  # yaml.YAMLError / json.JSONDecodeError
+        data, problems = load_yaml(path)  # safe loading; bad bytes, syntax errors, duplicate keys with their line
+        if problems:
+            raise NodeError(f"{path}: cannot parse the bone lengths: {problems[0].message}", location=problems[0].location)
+        text = None
+    else:
+        try:
+            text = path.read_text(encoding="utf-8")
+        except UnicodeDecodeError as e:
+            raise NodeError(f"{path}: not UTF-8 text (byte {e.start}: {e.object[e.start]:#04x})") from None
+    try:
+        if text is not None:
+            data = json.loads(text)
+    except Exception as e:  # json.JSONDecodeError
         mark = getattr(e, "problem_mark", None)
         where = f"{path}:{mark.line + 1}" if mark else str(path)
         raise NodeError(f"{where}: cannot parse the bone lengths: {getattr(e, 'problem', None) or e}") from None
