@@ -52,7 +52,8 @@ def print_summary(run, out_dir: Path) -> None:
                 if not isinstance(v, (dict, list)):
                     print(f"  {k:<28} {fmt_value(v)}")
     print(f"outputs in {out_dir}/:")
-    for name in list(run.graph.outputs) + ["manifest.json"]:
+    written = [name for name, (nid, _) in run.graph.outputs.items() if nid in run.results]
+    for name in written + ["manifest.json"]:
         print(f"  {out_dir / name}")
 
 
