@@ -159,7 +159,9 @@ PRESETS = ["none", "blender", "y-up", "mixamo"]
 
 
 def test_exported_cmu_motion_matches_fk_in_blender(blender, cmu_rotations, tmp_path) -> None:
-    """Every export preset, imported the way docs/blender.md says, puts every joint within 1 mm."""
+    """Every export preset, imported the way docs/blender.md says, puts every joint within 1 mm; and a
+    non-zero root offset, written to the root OFFSET, moves nothing (Blender and the project both take
+    the root position channels as absolute). One Blender process imports all the files."""
     rot = cmu_rotations
     assert rot["local_quat"].shape[0] >= 40
     jobs = []
@@ -169,12 +171,21 @@ def test_exported_cmu_motion_matches_fk_in_blender(blender, cmu_rotations, tmp_p
         path = run_node(export_bvh, {"preset": preset, "sheet": False}, work_dir=d, rotations=rot)["bvh"]
         jobs.append({"label": preset, "bvh": str(path), "settings": import_settings(preset)})
     jobs.append({"label": "none, no conversion", "bvh": jobs[0]["bvh"], "settings": import_settings("none", convert=False)})
+    shifted = {**rot, "local_quat": rot["local_quat"][:8], "root_position": rot["root_position"][:8],
+               "offsets": rot["offsets"].copy()}
+    shifted["offsets"][0] = [0.3, -0.2, 0.5]
+    (tmp_path / "offset").mkdir()
+    path = run_node(export_bvh, {"sheet": False}, work_dir=tmp_path / "offset", rotations=shifted)["bvh"]
+    assert Path(path).read_text().splitlines()[3].split() == ["OFFSET", "0.300000", "-0.200000", "0.500000"]
+    jobs.append({"label": "root offset", "bvh": str(path), "settings": import_settings("none")})
     report = import_in_blender(jobs, tmp_path)["imports"]
 
     for preset in PRESETS:
         head_mm, end_mm = blender_errors_mm(report[preset], rot, DEFAULT_AXES, joint_names_for(get_preset(preset).naming))
         assert head_mm < TOLERANCE_MM and end_mm < TOLERANCE_MM, preset
     head_mm, end_mm = blender_errors_mm(report["none, no conversion"], rot, np.eye(3), list(JOINT_NAMES))
+    assert head_mm < TOLERANCE_MM and end_mm < TOLERANCE_MM
+    head_mm, end_mm = blender_errors_mm(report["root offset"], shifted, DEFAULT_AXES, list(JOINT_NAMES))
     assert head_mm < TOLERANCE_MM and end_mm < TOLERANCE_MM
 
     # the comparison discriminates: the walk covers metres, and the other axis convention is far off
@@ -183,19 +194,6 @@ def test_exported_cmu_motion_matches_fk_in_blender(blender, cmu_rotations, tmp_p
     imp = report["none"]
     heads = np.asarray(imp["heads"])[:, [imp["bones"].index(nm) for nm in JOINT_NAMES]]
     assert np.linalg.norm(heads - pos, axis=-1).max() * 1000.0 > 100.0
-
-
-def test_non_zero_root_offset_is_ignored_like_blender(blender, cmu_rotations, tmp_path) -> None:
-    """A non-zero root offset is written to the file's root OFFSET and must move nothing (Blender and
-    the project both take the root position channels as absolute)."""
-    rot = {**cmu_rotations, "local_quat": cmu_rotations["local_quat"][:8],
-           "root_position": cmu_rotations["root_position"][:8], "offsets": cmu_rotations["offsets"].copy()}
-    rot["offsets"][0] = [0.3, -0.2, 0.5]
-    path = run_node(export_bvh, {"sheet": False}, work_dir=tmp_path, rotations=rot)["bvh"]
-    assert Path(path).read_text().splitlines()[3].split() == ["OFFSET", "0.300000", "-0.200000", "0.500000"]
-    report = import_in_blender([{"label": "x", "bvh": str(path), "settings": import_settings("none")}], tmp_path)
-    head_mm, end_mm = blender_errors_mm(report["imports"]["x"], rot, DEFAULT_AXES, list(JOINT_NAMES))
-    assert head_mm < TOLERANCE_MM and end_mm < TOLERANCE_MM
 
 
 def test_default_pipeline_bvh_matches_fk_in_blender(blender, tmp_path) -> None:

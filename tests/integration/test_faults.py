@@ -195,11 +195,16 @@ def _assert_clean_failure(proc: subprocess.CompletedProcess, folder_hint: str) -
 
 
 def test_output_under_a_regular_file(reference, tmp_path) -> None:
+    """In-process (the CLI prints this same TbhaError as 'error: ...', exit 2: see the mount tests)."""
+    from tbha_graph.core.cache import Cache
+    from tbha_graph.core.errors import TbhaError
+    from tbha_graph.core.runner import load_graph, run_graph
+
     blocker = tmp_path / "not_a_folder"
     blocker.write_text("a regular file\n")
-    out = blocker / "run"
-    proc = tbha_run(reference["pipeline"], out, warm_cache(reference, tmp_path / "cache"))
-    _assert_clean_failure(proc, str(blocker))
+    with pytest.raises(TbhaError, match="output folder") as info:
+        run_graph(load_graph(reference["pipeline"]), out_dir=blocker / "run", cache=Cache(warm_cache(reference, tmp_path / "cache")))
+    assert str(blocker) in str(info.value)
     assert blocker.read_text() == "a regular file\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cache", "not_a_folder"]
     check_cache(tmp_path / "cache")
