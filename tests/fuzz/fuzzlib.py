@@ -59,6 +59,8 @@ def time_limit(seconds: float = CASE_TIMEOUT_S, what: str = "case"):
     signal.setitimer(signal.ITIMER_REAL, seconds)
     try:
         yield
+    except Hang as e:  # reported as an assertion so hypothesis shrinks and prints the case
+        raise AssertionError(str(e)) from None
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, old)

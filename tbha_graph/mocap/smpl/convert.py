@@ -81,6 +81,7 @@ class _CscMatrix(_Stub):
         shape = s.get("_shape", s.get("shape"))
         try:
             m = csc_matrix((np.asarray(s["data"]), np.asarray(s["indices"]), np.asarray(s["indptr"])), shape=tuple(shape))
+            m.check_format(full_check=True)  # indices within the shape: toarray() of a damaged matrix writes out of bounds (segfault)
         except (KeyError, TypeError, ValueError) as e:
             raise NodeError(f"a sparse matrix in the file cannot be rebuilt: {e}") from None
         return m.toarray()
@@ -128,8 +129,11 @@ def _allowed() -> dict[tuple[str, str], object]:
     return allowed
 
 
-class RestrictedUnpickler(pickle.Unpickler):
-    """An unpickler that resolves only the classes listed in the module docstring."""
+class RestrictedUnpickler(pickle._Unpickler):
+    """An unpickler that resolves only the classes listed in the module docstring.
+
+    The pure-Python unpickler: its memo is a dict, where the C one grows an array to the largest memo
+    index in the file (a damaged 4-byte LONG_BINPUT index made a 10 kB file allocate gigabytes)."""
 
     def __init__(self, file, source: str = "the file"):
         super().__init__(file, encoding="latin1", fix_imports=True)
@@ -178,10 +182,16 @@ def read_smpl_pickle(path: str | Path) -> dict[str, np.ndarray]:
     arrays = {}
     for key in REQUIRED_KEYS:
         if key in obj:
-            v = _plain(obj[key])
-            if v is None:
-                v = np.asarray(obj[key])
-            arrays[key] = np.asarray(v)
+            try:
+                v = _plain(obj[key])
+                v = np.asarray(obj[key] if v is None else v)
+            except NodeError as e:
+                raise NodeError(f"{path}: {key}: {e.message}", hint=e.hint) from None
+            except (TypeError, ValueError) as e:  # e.g. ragged nested lists
+                raise NodeError(f"{path}: {key} is not an array: {e}") from None
+            if v.dtype.kind not in "biuf":
+                raise NodeError(f"{path}: {key} holds {v.dtype} values, not numbers")
+            arrays[key] = v
     return check_model_arrays(arrays, str(path))
 
 
