@@ -1,4 +1,6 @@
-"""Fuzzing the restricted SMPL pickle reader (``tbha_graph.mocap.smpl.convert.read_smpl_pickle``): a
+"""Fuzzing the SMPL model readers: the restricted pickle reader of the converter
+(``tbha_graph.mocap.smpl.convert.read_smpl_pickle``) and the ``.npz`` loader of the pipeline
+(``tbha_graph.mocap.smpl.model.load_model``). For the pickle reader: a
 damaged pickle must be refused with a ``NodeError`` naming the file, never run anything, never raise
 another exception or hang; one that is accepted is a well-formed model (a pickle has no checksum, so
 damaged numbers inside an array cannot be told from other numbers by any reader).
@@ -6,9 +8,12 @@ damaged numbers inside an array cannot be told from other numbers by any reader)
 Base: a one-vertex model in the official SMPL layout (numpy arrays, a scipy ``csc_matrix`` joint
 regressor, extra keys), pickled with protocol 2 like the official Python 2 files. While a case is read,
 an audit hook records any attempt to start a process, run code, touch the network or change files.
+For the ``.npz`` loader (base: the same model, dense, ``np.savez``): a ``NodeError`` naming the file, or
+a model whose arrays are the intact file's (an npz has CRCs: damage must not pass silently).
 """
 from __future__ import annotations
 
+import io
 import pickle
 import sys
 from pathlib import Path
@@ -21,6 +26,7 @@ from hypothesis import strategies as st
 from fuzzlib import CASES, assert_names_file, case, fuzz_settings, mutated, time_limit
 from tbha_graph.mocap.smpl.convert import read_smpl_pickle
 from tbha_graph.mocap.smpl.kintree import N_POSE_FEATURES, N_SMPL_JOINTS, SMPL_PARENTS
+from tbha_graph.mocap.smpl.model import load_model
 
 scipy_sparse = pytest.importorskip("scipy.sparse")
 
@@ -161,3 +167,46 @@ def test_fuzz_smpl_pickle(work, data) -> None:
             lambda t: BASE[: t[0]] + t[1] + BASE[t[0] + len(t[1]):]),
     ), label="damaged pickle")
     check_pickle(raw, work)
+
+
+# --- the .npz model loader ------------------------------------------------------------------------------
+def _npz(arrays: dict) -> bytes:
+    buf = io.BytesIO()
+    np.savez(buf, **{k: v for k, v in arrays.items() if isinstance(v, np.ndarray) and k != "vert_sym_idxs"})
+    return buf.getvalue()
+
+
+NPZ = _npz(DENSE)
+
+
+def check_npz(raw: bytes, work: Path) -> None:
+    path = work / "model.npz"
+    path.write_bytes(raw)
+    with time_limit(what="load_model"):
+        try:
+            model = load_model(path)
+        except Exception as e:  # noqa: BLE001
+            assert_names_file(e, path, need_line=False)
+            return
+    for name, key in (("v_template", "v_template"), ("shapedirs", "shapedirs"), ("posedirs", "posedirs"),
+                      ("J_regressor", "J_regressor"), ("weights", "weights")):
+        assert np.array_equal(getattr(model, name), DENSE[key]), f"{name} is not the intact file's"
+
+
+def test_found_npz_header_declaring_a_smaller_dtype(work) -> None:
+    """posedirs (5 kB, more than zipfile's 4 kB read chunk) with '<f4' in its header: numpy read half the
+    member, the CRC was never checked, and the model loaded with garbage pose blend shapes."""
+    i = NPZ.index(b"<f8", NPZ.index(b"posedirs.npy"))
+    check_npz(NPZ[:i] + b"<f4" + NPZ[i + 3:], work)
+
+
+@given(data=st.data())
+@fuzz_settings(max_examples=100)
+def test_fuzz_smpl_npz(work, data) -> None:
+    CASES["smpl model npz"] += 1
+    raw = data.draw(st.one_of(
+        mutated(NPZ),
+        st.tuples(st.integers(0, len(NPZ) - 1), st.binary(min_size=1, max_size=16)).map(
+            lambda t: NPZ[: t[0]] + t[1] + NPZ[t[0] + len(t[1]):]),
+    ), label="damaged npz")
+    check_npz(raw, work)

@@ -200,9 +200,17 @@ def load_model(path: str | Path) -> SmplModel:
                         hint=f"convert it once: python -m tbha_graph.mocap.smpl.convert {path} {path.with_suffix('.npz')}")
     if not path.is_file():
         raise NodeError(f"SMPL model file {path} does not exist", hint=HOW_TO_GET_THE_MODEL)
+    import zipfile
+    import zlib
+
     try:
         with np.load(path, allow_pickle=False) as z:
+            # numpy reads only the bytes a .npy header asks for: without this, a damaged header declaring a
+            # smaller dtype skips the zip's CRC-32 check and the array is read as garbage
+            damaged = z.zip.testzip() if hasattr(z, "zip") else None
+            if damaged is not None:
+                raise NodeError(f"{path}: {damaged} is damaged (its CRC-32 does not match)", hint=HOW_TO_GET_THE_MODEL)
             arrays = {k: z[k] for k in z.files}
-    except (OSError, ValueError, EOFError) as e:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError, RuntimeError) as e:
         raise NodeError(f"{path}: cannot be read as an .npz without pickle: {e}", hint=HOW_TO_GET_THE_MODEL) from None
     return SmplModel.from_arrays(arrays, str(path))
