@@ -20,12 +20,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from .cache import Cache
 from .errors import PipelineError, PipelineErrors, TbhaError
 from .progress import QUIET, Reporter
 from .study import metric_columns, write_tables
+from .yamlfile import load_yaml
 
 
 @dataclass
@@ -49,10 +48,9 @@ def collect_takes(spec: str) -> list[Take]:
     p = Path(spec)
     used: set[str] = set()
     if p.is_file() and p.suffix in (".yaml", ".yml"):
-        try:
-            data = yaml.safe_load(p.read_text())
-        except yaml.YAMLError as e:
-            raise PipelineErrors([PipelineError(f"{p}: not valid YAML: {e}")]) from None
+        data, problems = load_yaml(p)  # safe loading; bad bytes, syntax errors, duplicate keys with their line
+        if problems:
+            raise PipelineErrors([PipelineError(f"{p}: {e.message}", location=e.location, hint=e.hint) for e in problems])
         items = data.get("takes") if isinstance(data, dict) else data
         if not isinstance(items, list) or not items:
             raise PipelineErrors([PipelineError(f"{p}: expected 'takes:' with a list of paths or {{path: ...}} entries")])
@@ -62,6 +60,8 @@ def collect_takes(spec: str) -> list[Take]:
                 item = {"path": item}
             if not isinstance(item, dict) or "path" not in item:
                 raise PipelineErrors([PipelineError(f"{p}: take {i + 1} needs a 'path'")])
+            if not isinstance(item.get("set") or {}, dict):
+                raise PipelineErrors([PipelineError(f"{p}: take {i + 1}: 'set' must map NODE.PARAM to values")])
             path = Path(str(item["path"]))
             path = path if path.is_absolute() else (p.parent / path)
             name = str(item.get("name") or _name_for(path, used))
