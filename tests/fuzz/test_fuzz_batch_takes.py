@@ -70,7 +70,7 @@ def test_found_cases(raw, work) -> None:
 
 
 @given(raw=mutated(BASE, vocabulary(BASE)))
-@fuzz_settings(max_examples=150)
+@fuzz_settings(max_examples=100)
 def test_fuzz_take_list(raw, work) -> None:
     CASES["batch take list"] += 1
     check_takes(raw, work)

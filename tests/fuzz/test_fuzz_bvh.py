@@ -138,7 +138,7 @@ def test_found_cases(raw, work) -> None:
 
 
 @given(raw=mutated(BASE, VOCAB))
-@fuzz_settings(max_examples=500)
+@fuzz_settings(max_examples=350)
 def test_fuzz_bvh_reader(raw, work) -> None:
     CASES["bvh reader"] += 1
     check_bvh_file(raw, work)

@@ -164,7 +164,7 @@ CAM_BASES = {".yaml": CAM_YAML, ".json": CAM_JSON, ".npz": CAM_NPZ}
 
 @pytest.mark.parametrize("suffix", [".yaml", ".json", ".npz"])
 @given(data=st.data())
-@fuzz_settings(max_examples=120)
+@fuzz_settings(max_examples=80)
 def test_fuzz_camera_file(work, suffix, data) -> None:
     CASES[f"camera file ({suffix})"] += 1
     base = CAM_BASES[suffix]
@@ -173,7 +173,7 @@ def test_fuzz_camera_file(work, suffix, data) -> None:
 
 @pytest.mark.parametrize("suffix", [".yaml", ".json"])
 @given(data=st.data())
-@fuzz_settings(max_examples=120)
+@fuzz_settings(max_examples=80)
 def test_fuzz_bone_length_file(work, suffix, data) -> None:
     CASES[f"bone length file ({suffix})"] += 1
     base = BODY_YAML if suffix == ".yaml" else BODY_JSON

@@ -107,7 +107,7 @@ def test_found_cases(raw, work) -> None:
 
 @pytest.mark.parametrize("kind", ["stored", "deflated"])
 @given(data=st.data())
-@fuzz_settings(max_examples=150)
+@fuzz_settings(max_examples=100)
 def test_fuzz_ground_truth_npz(work, kind, data) -> None:
     CASES[f"ground truth npz ({kind})"] += 1
     raw = data.draw(st.one_of(

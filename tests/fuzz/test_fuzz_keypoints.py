@@ -201,21 +201,21 @@ def test_found_openpose_cases(raws, work) -> None:
 
 
 @given(raw=mutated(MP_JSON, vocabulary(MP_JSON[:200]) + (b"null", b"[]", b"true", b'"x"')))
-@fuzz_settings(max_examples=250)
+@fuzz_settings(max_examples=160)
 def test_fuzz_mediapipe_json(raw, work) -> None:
     CASES["mediapipe json"] += 1
     check_mediapipe_file(raw, ".json", work)
 
 
 @given(raw=mutated(MP_CSV, (b",", b"nose", b"frame", b"x", b"\"")))
-@fuzz_settings(max_examples=250)
+@fuzz_settings(max_examples=160)
 def test_fuzz_mediapipe_csv(raw, work) -> None:
     CASES["mediapipe csv"] += 1
     check_mediapipe_file(raw, ".csv", work)
 
 
 @given(which=st.integers(0, 2), raw=st.data())
-@fuzz_settings(max_examples=200)
+@fuzz_settings(max_examples=120)
 def test_fuzz_openpose_folder(which, raw, work) -> None:
     CASES["openpose folder"] += 1
     raws = list(OP_BASE)

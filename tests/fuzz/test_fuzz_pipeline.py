@@ -165,7 +165,7 @@ def test_found_cases(raw, work) -> None:
 
 
 @given(raw=mutated(PIPELINE, VOCAB))
-@fuzz_settings(max_examples=350)
+@fuzz_settings(max_examples=250)
 def test_fuzz_pipeline_file(raw, work) -> None:
     CASES["pipeline file"] += 1
     p = work / "case.yaml"
@@ -174,7 +174,7 @@ def test_fuzz_pipeline_file(raw, work) -> None:
 
 
 @given(raw=mutated(BASE_PART, VOCAB))
-@fuzz_settings(max_examples=150)
+@fuzz_settings(max_examples=100)
 def test_fuzz_extended_base_file(raw, work) -> None:
     """Errors in a file reached through ``extends`` name that file (or the one extending it)."""
     CASES["pipeline base file (extends)"] += 1

@@ -158,7 +158,7 @@ def test_found_cases(raw, work) -> None:
 
 
 @given(data=st.data())
-@fuzz_settings(max_examples=200)
+@fuzz_settings(max_examples=120)
 def test_fuzz_smpl_pickle(work, data) -> None:
     CASES["smpl pickle"] += 1
     raw = data.draw(st.one_of(
@@ -201,7 +201,7 @@ def test_found_npz_header_declaring_a_smaller_dtype(work) -> None:
 
 
 @given(data=st.data())
-@fuzz_settings(max_examples=100)
+@fuzz_settings(max_examples=60)
 def test_fuzz_smpl_npz(work, data) -> None:
     CASES["smpl model npz"] += 1
     raw = data.draw(st.one_of(

@@ -95,14 +95,14 @@ def test_found_mapping_cases(raw, work) -> None:
 
 
 @given(raw=mutated(SUIT, vocabulary(SUIT)))
-@fuzz_settings(max_examples=250)
+@fuzz_settings(max_examples=160)
 def test_fuzz_suit_spec(raw, work) -> None:
     CASES["suit spec"] += 1
     check_suit_file(raw, work)
 
 
 @given(raw=mutated(MAPPING, vocabulary(MAPPING)))
-@fuzz_settings(max_examples=200)
+@fuzz_settings(max_examples=140)
 def test_fuzz_skeleton_mapping(raw, work) -> None:
     CASES["skeleton mapping"] += 1
     check_mapping_file(raw, work)

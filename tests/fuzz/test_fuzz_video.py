@@ -130,7 +130,7 @@ def _last_jpeg(raw: bytes) -> tuple[int, int]:
 
 @pytest.mark.parametrize("kind", KINDS)
 @given(data=st.data())
-@fuzz_settings(max_examples=60)
+@fuzz_settings(max_examples=40)
 def test_fuzz_truncated_video(videos, kind, data) -> None:
     CASES[f"video truncated ({kind})"] += 1
     raw = videos[kind]["bytes"]
@@ -151,7 +151,7 @@ def test_mjpg_cut_inside_its_last_frame_is_detected(videos) -> None:
 
 @pytest.mark.parametrize("kind", KINDS)
 @given(data=st.data())
-@fuzz_settings(max_examples=60)
+@fuzz_settings(max_examples=40)
 def test_fuzz_corrupted_video(videos, kind, data) -> None:
     CASES[f"video corrupted ({kind})"] += 1
     raw = bytearray(videos[kind]["bytes"])
