@@ -35,9 +35,9 @@ from ...core.types import Json
 from ..calibrate.observations import read_tracks
 from ..camera import Camera
 from ..ports import CAMERA, MOTION, TRACKS2D
-from ..skeleton import BONES, JOINT_INDEX, JOINT_NAMES, N_JOINTS
+from ..skeleton import BONES, JOINT_INDEX, N_JOINTS
 from .body import body_lengths
-from .ray_sphere import check_image_size, ray_directions, solve_ray_sphere
+from .ray_sphere import check_image_size, motion_bundle, ray_directions, solve_ray_sphere
 
 _LS, _RS = JOINT_INDEX["left_shoulder"], JOINT_INDEX["right_shoulder"]
 #: Pairs with a fixed distance: the 15 bones and the shoulder-to-shoulder side of the triangle.
@@ -252,7 +252,6 @@ def sequence_lsq(ctx, tracks, camera, body):
     check_image_size(tr, cam)
     lengths = body_lengths(body)
     P, report = solve_sequence_lsq(tr.points, tr.tracked, cam, lengths, tr.fps, p, progress=ctx.progress)
-    motion = {"joints": cam.to_world(P), "fps": np.asarray(tr.fps, dtype=np.float64), "tracked": tr.tracked.copy(),
-              "joint_names": np.array(JOINT_NAMES)}
+    motion = motion_bundle(P, cam, tr)
     report["frames"] = int(tr.n_frames)
     return {"motion": motion, "report": report}
