@@ -65,15 +65,11 @@ def ping_pong(src: Path, dst: Path, times: int) -> None:
     """Write ``src`` forwards, backwards, forwards... (``times`` passes) to ``dst`` (mp4v)."""
     import cv2
 
-    cap = cv2.VideoCapture(str(src))
-    frames = []
-    while True:
-        ok, f = cap.read()
-        if not ok:
-            break
-        frames.append(f)
-    h, w = frames[0].shape[:2]
-    wr = cv2.VideoWriter(str(dst), cv2.VideoWriter_fourcc(*"mp4v"), cap.get(cv2.CAP_PROP_FPS), (w, h))
+    from tbha_graph.mocap.io.video import iter_frames, probe_video
+
+    clip = probe_video(src)
+    frames = [f for _, f in iter_frames(clip)]
+    wr = cv2.VideoWriter(str(dst), cv2.VideoWriter_fourcc(*"mp4v"), clip.fps, (clip.width, clip.height))
     for i in range(times):
         for f in frames if i % 2 == 0 else frames[::-1]:
             wr.write(f)
