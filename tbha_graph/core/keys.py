@@ -29,8 +29,6 @@ from .types import hash_json
 
 CACHE_FORMAT = 1
 
-_fingerprints: dict[int, str] = {}
-
 
 def _module_closure(root_module: types.ModuleType) -> list[types.ModuleType]:
     """The module and every module of the same top-level package reachable through globals."""
@@ -57,7 +55,7 @@ def _module_closure(root_module: types.ModuleType) -> list[types.ModuleType]:
 
 def code_fingerprint(spec: NodeSpec) -> str:
     """SHA-256 over the source files of the node's module closure (memoised per process)."""
-    fp = _fingerprints.get(id(spec))
+    fp = spec.__dict__.get("_code_fingerprint")  # memoised on the spec itself (an id() key could be reused)
     if fp is not None:
         return fp
     mod = sys.modules.get(spec.module)
@@ -77,7 +75,7 @@ def code_fingerprint(spec: NodeSpec) -> str:
                 except (OSError, TypeError):
                     h.update(b"<no source>")
     fp = h.hexdigest()
-    _fingerprints[id(spec)] = fp
+    spec.__dict__["_code_fingerprint"] = fp
     return fp
 
 

@@ -117,12 +117,20 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
 # ---------------------------------------------------------------------------------------------
 # arrays
 # ---------------------------------------------------------------------------------------------
+#: dtype *kinds* a port may declare instead of an exact dtype, with the numpy kind codes each admits
+_KINDS = {"float": "f", "int": "iu", "uint": "u", "bool": "b", "str": "U"}
+
+
+def _kinds_of(spec: str) -> set[str]:
+    """numpy kind codes a declared dtype (exact, e.g. "float32", or a kind, e.g. "float") stands for."""
+    return set(_KINDS[spec]) if spec in _KINDS else {np.dtype(spec).kind}
+
+
 def _dtype_ok(want: str | None, got: np.dtype) -> bool:
     if want is None:
         return True
-    if want in ("float", "int", "bool", "str", "uint"):
-        kinds = {"float": "f", "int": "iu", "uint": "u", "bool": "b", "str": "U"}[want]
-        return got.kind in kinds
+    if want in _KINDS:
+        return got.kind in _KINDS[want]
     return np.dtype(want) == got
 
 
@@ -152,9 +160,10 @@ class Array(PortType):
     def _accepts(self, other: PortType) -> bool:
         if not isinstance(other, Array):
             return False
-        if self.dtype is not None and other.dtype is not None:
-            a, b = self.dtype, other.dtype
-            if a != b and not (a in ("float", "int", "bool", "str", "uint") and _dtype_ok(a, np.dtype(b) if b not in ("float", "int", "bool", "str", "uint") else np.dtype({"float": "f8", "int": "i8", "uint": "u8", "bool": "?", "str": "U1"}[b]))):
+        a, b = self.dtype, other.dtype
+        if a is not None and b is not None and a != b:
+            # an exact dtype accepts only itself; a kind accepts any dtype (or kind) inside it
+            if a not in _KINDS or not _kinds_of(b) <= _kinds_of(a):
                 return False
         if self.shape is not None and other.shape is not None:
             if len(self.shape) != len(other.shape):
