@@ -288,3 +288,25 @@ def test_synthetic_pipeline_file_loads():
 
     graph = load_graph(ROOT / "pipelines" / "synthetic.yaml")
     assert set(graph.outputs) == {"sample.mp4", "ground_truth.npz"}
+
+
+def test_lead_in_turn_turns_heading_and_path_keeping_bones():
+    """turn_degrees turns the clip's heading and its walking direction together (a walk that turns round)."""
+    from tbha_graph.mocap.synth.tpose_lead_in import LeadInParams, _facing_angle, lead_in_motion
+
+    if not BVH.is_file():
+        pytest.skip(f"{BVH} missing")
+    base = dict(path=str(BVH), hold_seconds=0.2, blend_seconds=0.2, duration=3.0)
+    straight, _ = lead_in_motion(LeadInParams(**base))
+    turned, _ = lead_in_motion(LeadInParams(**base, turn_degrees=180.0, turn_start=0.5, turn_seconds=2.0))
+    h0 = np.degrees(np.unwrap([_facing_angle(f) for f in straight]))
+    h1 = np.degrees(np.unwrap([_facing_angle(f) for f in turned]))
+    assert abs((h1[-1] - h0[-1]) - 180.0) < 2.0
+    np.testing.assert_allclose(turned[:30], straight[:30], atol=1e-9)  # before the turn: unchanged
+    lengths = sk.measure_bone_lengths(turned) - sk.measure_bone_lengths(straight)
+    assert np.abs(lengths).max() < 1e-6
+    # the path turns too: the late displacement points another way than without the turn
+    d0, d1 = straight[-1, 0] - straight[-60, 0], turned[-1, 0] - turned[-60, 0]
+    assert np.linalg.norm(d0[[0, 2]]) > 0.05
+    cos = (d0[[0, 2]] @ d1[[0, 2]]) / np.linalg.norm(d0[[0, 2]]) / np.linalg.norm(d1[[0, 2]])
+    assert cos < -0.8

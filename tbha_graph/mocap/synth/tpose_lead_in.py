@@ -15,7 +15,10 @@ How (on the *source* skeleton, so bone lengths never change):
 3. Every joint's local rotation is slerped from the T-pose to the clip (root rotation included), with a
    smoothstep weight; the root position is interpolated linearly; forward kinematics on the source
    skeleton; then the mapped 16 joints, in metres.
-4. Height: the clip is shifted vertically so that, standing, the ankle joint centres are
+4. Optional extra turn (``turn_degrees``): from ``turn_start`` over ``turn_seconds`` the clip's heading
+   is turned progressively (smoothstep) about the vertical; each frame's root displacement is turned
+   with it, so a straight walk becomes a walk along a curve that turns round (bone lengths unchanged).
+5. Height: the clip is shifted vertically so that, standing, the ankle joint centres are
    ``ankle_height`` above the floor (y = 0; 5th percentile of the lower ankle over the clip), and the
    T-pose stands with its lower ankle at that height too.
 
@@ -52,6 +55,14 @@ class LeadInParams(BaseModel):
     start: float = Field(0.0, ge=0, description="start of the clip part used", json_schema_extra={"unit": "s"})
     duration: float | None = Field(None, gt=0, description="length of the clip part used (None: to the end)", json_schema_extra={"unit": "s"})
     ankle_height: float = Field(0.08, gt=0, le=0.3, description="ankle joint centre above the floor when standing", json_schema_extra={"unit": "m"})
+    turn_degrees: float = Field(
+        0.0, ge=-1080, le=1080,
+        description="extra heading change given to the clip (about the vertical, + = to the actor's left): the "
+                    "root's rotation and its walking direction turn together, so a straight walk becomes a walk "
+                    "that turns round", json_schema_extra={"unit": "deg"},
+    )
+    turn_start: float = Field(0.0, ge=0, description="clip time at which the extra turn starts", json_schema_extra={"unit": "s"})
+    turn_seconds: float = Field(2.0, gt=0, le=60, description="time the extra turn takes (smoothstep)", json_schema_extra={"unit": "s"})
 
 
 def _slerp(q0: np.ndarray, q1: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -101,6 +112,21 @@ def _facing_angle(joints16: np.ndarray) -> float:
     return float(np.arctan2(front[0], front[2]))
 
 
+def _turn_clip(local: np.ndarray, root: np.ndarray, A: np.ndarray, fps: float, p: LeadInParams):
+    """The clip with the extra heading change of ``p.turn_degrees`` (module docstring, step 4)."""
+    from scipy.spatial.transform import Rotation
+
+    t = np.arange(local.shape[0]) / fps
+    x = np.clip((t - p.turn_start) / p.turn_seconds, 0.0, 1.0)
+    angle = np.radians(p.turn_degrees) * x * x * (3.0 - 2.0 * x)
+    turn = Rotation.from_matrix(A.T @ Rotation.from_rotvec(angle[:, None] * [0.0, 1.0, 0.0]).as_matrix() @ A)
+    step = np.diff(root, axis=0)
+    root = np.concatenate([root[:1], root[:1] + np.cumsum(turn[1:].apply(step), axis=0)])
+    local = local.copy()
+    local[:, 0] = (turn * Rotation.from_quat(local[:, 0])).as_quat()
+    return local, root
+
+
 def lead_in_motion(p: LeadInParams) -> tuple[np.ndarray, float]:
     """Joints (n, 16, 3) metres world and fps of the clip with its T-pose opening (module docstring)."""
     from scipy.spatial.transform import Rotation
@@ -142,6 +168,9 @@ def lead_in_motion(p: LeadInParams) -> tuple[np.ndarray, float]:
     r0w = A @ root[0] * scale
     root = h_src.apply(root - A.T @ np.array([r0w[0], 0.0, r0w[2]]) / scale)
     local[:, 0] = (h_src * Rotation.from_quat(local[:, 0])).as_quat()
+
+    if p.turn_degrees:
+        local, root = _turn_clip(local, root, A, fps, p)
 
     # floor: standing ankles at ankle_height
     ank = [JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]]
