@@ -91,19 +91,32 @@ def start_frame(centres, areas, joints_of, params: StartParams, fps: float) -> t
 
 
 def run_passes(candidates: Callable[[int], list[np.ndarray]], n: int, start: int, points0: np.ndarray,
-               make: Callable[[np.ndarray], FrameTracker]) -> tuple[np.ndarray, np.ndarray]:
+               make: Callable[[np.ndarray], FrameTracker]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Track from ``start`` (joints at ``points0`` (16, 2)) forwards to row n-1 and backwards to row 0.
 
-    ``candidates(row)`` gives a frame's candidates per class; ``make(points0)`` a fresh tracker."""
+    ``candidates(row)`` gives a frame's candidates per class; ``make(points0)`` a fresh tracker.
+    Returns points, tracked and ``doubt`` (n,) uint8: each frame's :data:`DOUBT` bits (a tracker that
+    sets a ``doubt`` attribute after each step reports them; others report none)."""
     points = np.full((n, N_JOINTS, 2), np.nan)
     tracked = np.zeros((n, N_JOINTS), bool)
+    doubt = np.zeros(n, np.uint8)
     points[start] = points0
     tracked[start] = True
     for rows in (range(start + 1, n), range(start - 1, -1, -1)):
         tr = make(points0)
         for t in rows:
             points[t], tracked[t] = tr.step(candidates(t))
-    return points, tracked
+            doubt[t] = int(getattr(tr, "doubt", 0))
+    return points, tracked, doubt
+
+
+#: Why a frame's labelling is doubtful: bit of each reason in a tracks bundle's ``doubtful`` (n,) uint8.
+DOUBT: dict[str, int] = {"few patches": 1, "lost joints": 2, "ambiguous identity": 4, "high residual": 8}
+
+
+def doubt_names(bits: int) -> list[str]:
+    """The reasons set in ``bits`` (see :data:`DOUBT`)."""
+    return [name for name, b in DOUBT.items() if int(bits) & b]
 
 
 def frame_candidates(centres: np.ndarray) -> Callable[[int], list[np.ndarray]]:
@@ -116,9 +129,10 @@ def frame_candidates(centres: np.ndarray) -> Callable[[int], list[np.ndarray]]:
     return get
 
 
-def tracks_bundle(points, tracked, det: dict) -> dict[str, np.ndarray]:
+def tracks_bundle(points, tracked, det: dict, doubt=None) -> dict[str, np.ndarray]:
+    """The TRACKS2D bundle; with ``doubt`` (n,) also ``doubtful`` (n,) uint8 (bits of :data:`DOUBT`)."""
     n = len(points)
-    return {
+    out = {
         "points": np.asarray(points, dtype=np.float64),
         "tracked": np.asarray(tracked, dtype=bool),
         "fps": np.asarray(float(det["fps"])),
@@ -126,3 +140,6 @@ def tracks_bundle(points, tracked, det: dict) -> dict[str, np.ndarray]:
         "height": np.asarray(int(det["height"])),
         "frame_index": np.asarray(det.get("frame_index", np.arange(n)), dtype=np.int64),
     }
+    if doubt is not None:
+        out["doubtful"] = np.asarray(doubt, dtype=np.uint8)
+    return out

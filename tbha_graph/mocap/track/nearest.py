@@ -70,7 +70,7 @@ def nearest(ctx, detections, colors) -> dict:
     centres, areas = check_detections(detections)
     joints_of = class_joints(model, detections["colour_names"])
     start, points0 = start_frame(centres, areas, joints_of, p, float(detections["fps"]))
-    points, tracked = run_passes(
+    points, tracked, _ = run_passes(
         frame_candidates(centres), len(centres), start, points0, lambda p0: NearestTracker(p0, joints_of, p)
     )
     return {"tracks": tracks_bundle(points, tracked, detections)}

@@ -65,8 +65,18 @@ def identify(centres: np.ndarray, areas: np.ndarray, class_joints: list[list[int
         # the largest candidates, one per joint, then ordered top to bottom (ties: left to right)
         take = valid[np.argsort(-areas[c, valid], kind="stable")[: len(joints)]]
         cand = centres[c, take]
-        order = np.lexsort((cand[:, 0], cand[:, 1]))
-        for j, k in zip(_rank_joints(joints), order):
+        ranked = _rank_joints(joints)
+        order = np.argsort(cand[:, 1], kind="stable")  # top to bottom...
+        heights = [round(tpose()[j, 1], 6) for j in ranked]
+        i = 0
+        while i < len(ranked):  # ...and within a tier of equal T-pose height (a left/right pair), left to right
+            e = i
+            while e < len(ranked) and heights[e] == heights[i]:
+                e += 1
+            tier = order[i:e]
+            order[i:e] = tier[np.argsort(cand[tier, 0], kind="stable")]
+            i = e
+        for j, k in zip(ranked, order):
             pts[j] = cand[k]
         if len(joints) > 1:
             ys = np.sort(cand[:, 1])

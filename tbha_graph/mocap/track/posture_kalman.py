@@ -1,16 +1,31 @@
-"""``track.posture_kalman``: posture rules on the start frame, then Kalman prediction and optimal
-assignment (the default tracker).
+"""``track.posture_kalman``: posture rules on the start frame, then Kalman prediction bounded by the
+body and optimal assignment per colour (the default tracker).
 
-Start frame: the seed's posture rules identify same-coloured patches (:mod:`.posture`). Later frames
-(seed: "continuity of motion"): each joint has a constant-velocity ``cv2.KalmanFilter`` (state x, y,
-vx, vy in px and px/frame); the candidates of each colour are assigned to that colour's joints by
-minimum total distance to the predictions (``scipy.optimize.linear_sum_assignment``), within a gate
-that widens with the prediction's uncertainty. A joint left without a candidate is marked not
-tracked and keeps its prediction (its velocity fading), so it is never given another patch's
-detection; it is picked up again when a candidate reappears within its gate.
+Start frame: the seed's posture rules identify same-coloured patches (:mod:`.posture`), left/right
+pairs (the seed's suit) by their image order. Later frames (seed: "continuity of motion"):
 
-``points`` hold the detected centres where tracked (the filter is used for association only;
-smoothing is a downstream filter's job).
+* each joint has a constant-velocity ``cv2.KalmanFilter`` (x, y, vx, vy in px and px/frame) while it is
+  seen or was seen in the last ``lost_after_frames`` frames; its gate widens with its uncertainty;
+* a joint unseen for longer is **lost**: it is placed from its parent by the body (:mod:`.body`: its last
+  seen offset, rescaled, mirrored when the actor has turned round, never farther than the bone can
+  reach), not extrapolated; it is re-acquired by a candidate of its colour that its bones can reach from
+  the nearest joint seen in this frame (along the bones), nearest to where that joint puts it. A limb
+  with nothing seen to hang from waits (its identity would be a guess); the torso takes the candidate
+  nearest to where the body last had it;
+* the candidates of each colour are assigned to that colour's joints globally
+  (``scipy.optimize.linear_sum_assignment``; cost = distance over the joint's gate, with "not visible"
+  as an option costing one gate), classes in the order of the body tree so parents are placed first;
+  a left/right pair attached to the torso (shoulders, hip joints) that comes back after a loss is
+  ordered by the body's facing (facing the camera, left on the image's right; back turned, left on
+  the left; the chest patch on the suit's front tells which);
+* every untracked point is finally brought within reach of its tracked neighbours
+  (:meth:`.body.BodyBounds.settle`): no joint is placed where its bones cannot reach.
+
+``points`` hold the detected centres where tracked (the filter is used for association only; smoothing
+is a downstream filter's job). ``doubtful`` (n,) uint8 flags each frame whose labelling is doubtful
+(bits of :data:`.common.DOUBT`): fewer than ``min_patches`` patches tracked, lost joints, an ambiguous
+identity (a same-coloured pair either way about as good, or decided by the facing), or tracked patches
+far (median > ``residual_px``) from their predictions.
 """
 from __future__ import annotations
 
@@ -24,8 +39,14 @@ from ...core.types import Json
 from ..color.model import as_color_model
 from ..ports import TRACKS2D
 from ..segment.detections import DETECTIONS
-from ..skeleton import N_JOINTS
-from .common import StartParams, check_detections, class_joints, frame_candidates, run_passes, start_frame, tracks_bundle
+from ..skeleton import JOINT_INDEX, N_JOINTS, PARENTS
+from .body import BodyBounds
+from .common import (DOUBT, StartParams, check_detections, class_joints, frame_candidates, run_passes, start_frame,
+                     tracks_bundle)
+
+HEAD, CHEST, ROOT = JOINT_INDEX["head"], JOINT_INDEX["chest"], JOINT_INDEX["hips"]
+TORSO = frozenset(JOINT_INDEX[n] for n in ("hips", "chest", "neck"))
+ROOT_CHILDREN = tuple(JOINT_INDEX[n] for n in ("chest", "left_hip", "right_hip"))
 
 _INF = 1e9
 
@@ -48,16 +69,29 @@ class PostureKalmanParams(StartParams):
         1.0, gt=0, description="standard deviation of a detected centre", json_schema_extra={"unit": "px"}
     )
     velocity_decay: float = Field(
-        0.8, ge=0, le=1, description="a lost joint's predicted velocity is multiplied by this every frame"
+        0.8, ge=0, le=1, description="an unseen joint's predicted velocity is multiplied by this every frame"
+    )
+    lost_after_frames: int = Field(
+        4, ge=0, description="a joint unseen for longer is lost: placed from its parent by the body, re-acquired "
+                             "by any candidate its bones can reach", json_schema_extra={"unit": "frame"},
+    )
+    min_patches: int = Field(
+        10, ge=0, le=15, description="frames with fewer of the 15 patches tracked are reported doubtful"
+    )
+    residual_px: float = Field(
+        12.0, gt=0, description="frames whose tracked patches are this far (median) from their predictions are "
+                                "reported doubtful", json_schema_extra={"unit": "px"},
     )
 
 
 class KalmanTracker:
-    """Constant-velocity Kalman filters for the 16 joints plus per-colour optimal assignment."""
+    """Constant-velocity Kalman filters for the 16 joints, bounded by the body, plus per-colour optimal
+    assignment with a "not visible" option (module docstring)."""
 
     def __init__(self, points0: np.ndarray, joints_of: list[list[int]], p: PostureKalmanParams):
         self.joints_of = joints_of
         self.p = p
+        points0 = np.asarray(points0, dtype=np.float64)
         q = p.acceleration**2
         Q = np.array([[0.25, 0, 0.5, 0], [0, 0.25, 0, 0.5], [0.5, 0, 1, 0], [0, 0.5, 0, 1]], np.float32) * q
         self.filters = []
@@ -67,59 +101,155 @@ class KalmanTracker:
             kf.measurementMatrix = np.array([[1, 0, 0, 0], [0, 1, 0, 0]], np.float32)
             kf.processNoiseCov = Q.copy()
             kf.measurementNoiseCov = np.eye(2, dtype=np.float32) * p.measurement_noise**2
-            kf.statePost = np.array([[points0[j, 0]], [points0[j, 1]], [0.0], [0.0]], np.float32)
-            kf.errorCovPost = np.diag([p.measurement_noise**2] * 2 + [p.gate_px**2 / 4.0] * 2).astype(np.float32)
+            self._reset(kf, points0[j])
             self.filters.append(kf)
+        self.body = BodyBounds(points0, joints_of)
+        self.last = points0.copy()
+        self.unseen = np.zeros(N_JOINTS, np.int64)  # frames since each joint was last tracked
+        self.doubt = 0  # reasons (bits of DOUBT_REASONS) the last frame's labelling is doubtful
+
+    def _reset(self, kf, xy) -> None:
+        kf.statePost = np.array([[xy[0]], [xy[1]], [0.0], [0.0]], np.float32)
+        kf.errorCovPost = np.diag([self.p.measurement_noise**2] * 2 + [self.p.gate_px**2 / 4.0] * 2).astype(np.float32)
 
     def step(self, candidates: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-        pred = np.empty((N_JOINTS, 2))
+        p = self.p
+        body = self.body
+        kf_pred = np.empty((N_JOINTS, 2))
         spread = np.empty(N_JOINTS)
         for j, kf in enumerate(self.filters):
             s = kf.predict()
-            pred[j] = s[0, 0], s[1, 0]
+            kf_pred[j] = s[0, 0], s[1, 0]
             P = kf.errorCovPre
             spread[j] = np.sqrt(float(P[0, 0] + P[1, 1]))
-        gate = np.minimum(self.p.max_gate_px, self.p.gate_px + self.p.gate_sigma * spread)
-        points = pred.copy()
+        lost = self.unseen > p.lost_after_frames
+        points = np.full((N_JOINTS, 2), np.nan)
+        unc = np.zeros(N_JOINTS)  # px: how far each joint's point of this frame may be off
         tracked = np.zeros(N_JOINTS, bool)
-        for c, joints in enumerate(self.joints_of):
-            det = candidates[c]
-            if len(det) == 0 or not joints:
+        doubt = 0
+        residuals = []
+        done = np.zeros(N_JOINTS, bool)
+
+        def parent_of(j: int) -> tuple[np.ndarray | None, float]:
+            par = int(PARENTS[j])
+            if par < 0:
+                return None, 0.0
+            if done[par]:
+                return points[par], unc[par]
+            if lost[par]:  # its class comes later: its last point, uncertain by its own reach
+                return self.last[par], body.reach(par) + p.gate_px
+            return kf_pred[par], min(p.max_gate_px, p.gate_sigma * spread[par])
+
+        # joints seen, to anchor lost ones: placed in this frame, else tracked in the previous one
+        seen = {j: (kf_pred[j], p.gate_px) for j in range(N_JOINTS) if self.unseen[j] == 0}
+        for c in body.class_order:
+            J = self.joints_of[c]
+            if not J:
                 continue
-            J = np.asarray(joints)
-            cost = np.linalg.norm(pred[J, None, :] - det[None, :, :], axis=2)
-            cost = np.where(cost <= gate[J, None], cost, _INF)
-            rows, cols = linear_sum_assignment(cost)
-            for r, k in zip(rows, cols):
-                if cost[r, k] >= _INF:
+            det = candidates[c]
+            m, k = len(J), len(det)
+            pred = np.empty((m, 2))
+            gate = np.empty(m)
+            anchor = [parent_of(j) for j in J]
+            # costs are distances over the joint's gate (<= 1 inside it); "not visible" costs 1 for every joint
+            cost = np.full((m, k + m), _INF)
+            cost[np.arange(m), k + np.arange(m)] = 1.0
+            for r, j in enumerate(J):
+                P, u = anchor[r]
+                if not lost[j]:
+                    pred[r] = kf_pred[j]
+                    gate[r] = min(p.max_gate_px, p.gate_px + p.gate_sigma * spread[j])
+                    if k:
+                        dist = np.linalg.norm(det - pred[r], axis=1)
+                        cost[r, :k] = np.where(dist <= gate[r], dist / gate[r], _INF)
                     continue
-                j = int(J[r])
-                self.filters[j].correct(det[k].astype(np.float32).reshape(2, 1))
-                points[j] = det[k]
-                tracked[j] = True
-        for j in np.flatnonzero(~tracked):
-            kf = self.filters[j]
-            s = kf.statePost
-            s[2:] *= self.p.velocity_decay
-            kf.statePost = s
+                if j == ROOT:  # from a torso joint placed in this frame, else where it was
+                    near = [c2 for c2 in ROOT_CHILDREN if done[c2] and tracked[c2]]
+                    pred[r] = (points[near[0]] - body.offset_now(near[0])) if near else self.last[j]
+                else:
+                    pred[r] = body.predict_from_parent(j, P, self.last[j], u)
+                if not k:
+                    continue
+                found = body.anchor(j, seen)
+                if found is not None:  # re-acquisition: a candidate its bones can reach from the nearest
+                    point, reach, expected = found  # joint seen (along the bones), near where they put it
+                    dist = np.linalg.norm(det - expected, axis=1)
+                    ok = np.linalg.norm(det - point, axis=1) <= reach
+                    norm = reach + p.gate_px
+                elif j in TORSO:  # nothing seen to hang from (a torso seen again after a turn):
+                    dist = np.linalg.norm(det - pred[r], axis=1)  # the nearest to where the body last had it
+                    ok = dist <= p.max_gate_px
+                    norm = p.max_gate_px
+                else:  # a limb with nothing seen to hang from: its identity would be a guess; wait
+                    continue
+                cost[r, :k] = np.where(ok, 0.5 * np.minimum(dist / norm, 1.0), _INF)
+            rows, cols = linear_sum_assignment(cost)
+            got = {int(r): int(col) for r, col in zip(rows, cols) if col < k and cost[r, col] < _INF}
+            if k >= 2 and len(J) == 2:
+                # facing for a torso mirror pair: the chest patch (front of the suit) seen -> facing the camera;
+                # lost while the pair comes back -> the back is turned; else as last seen
+                facing = 1.0 if tracked[CHEST] else (-1.0 if lost[CHEST] and all(lost[J]) else None)
+                got, ambiguous = body.resolve_pair(J, det, got, cost, lost, facing)
+                if ambiguous:
+                    doubt |= DOUBT["ambiguous identity"]
+            for r, j in enumerate(J):
+                if r in got:
+                    points[j] = det[got[r]]
+                    tracked[j] = True
+                    seen[j] = (points[j], 0.0)
+                    if not lost[j]:
+                        residuals.append(float(np.linalg.norm(det[got[r]] - kf_pred[j])))
+                else:
+                    P, u = anchor[r]
+                    points[j], unc[j] = body.bounded(j, pred[r], P, u, self.last[j], lost[j])
+                    seen.pop(j, None)
+                    if not lost[j]:
+                        unc[j] = max(unc[j], min(p.max_gate_px, p.gate_sigma * spread[j]))
+                done[j] = True
+        body.settle(points, tracked)
+        body.observe(points, tracked)
+        for j, kf in enumerate(self.filters):
+            if tracked[j]:
+                if lost[j]:
+                    self._reset(kf, points[j])
+                else:
+                    kf.correct(points[j].astype(np.float32).reshape(2, 1))
+            else:
+                s = kf.statePost
+                s[2:] *= p.velocity_decay
+                if self.unseen[j] + 1 > p.lost_after_frames:  # lost: the filter follows the body's estimate
+                    s[0, 0], s[1, 0] = points[j]
+                    s[2:] = 0.0
+                kf.statePost = s
+        self.unseen = np.where(tracked, 0, self.unseen + 1)
+        self.last = points.copy()
+        patched = [j for j in range(N_JOINTS) if j != HEAD]
+        if tracked[patched].sum() < p.min_patches:
+            doubt |= DOUBT["few patches"]
+        if (self.unseen > p.lost_after_frames).any():
+            doubt |= DOUBT["lost joints"]
+        if residuals and float(np.median(residuals)) > p.residual_px:
+            doubt |= DOUBT["high residual"]
+        self.doubt = doubt
         return points, tracked
 
 
 @node(
-    "track.posture_kalman", version=1,
+    "track.posture_kalman", version=2,
     inputs={"detections": DETECTIONS, "colors": Json(doc="the colour model the segmenter used")},
     outputs={"tracks": TRACKS2D}, params=PostureKalmanParams,
 )
 def posture_kalman(ctx, detections, colors) -> dict:
     """Identify the 16 joints in the per-colour detections: posture rules on the start T-pose, then
-    constant-velocity Kalman prediction and optimal assignment per colour; occluded patches are
-    marked not tracked (with their prediction) and recovered when they reappear."""
+    constant-velocity Kalman prediction bounded by the body and optimal assignment per colour; occluded
+    patches are marked not tracked (placed on the body) and re-acquired when they reappear; doubtful
+    frames are flagged."""
     p: PostureKalmanParams = ctx.params
     model = as_color_model(colors)
     centres, areas = check_detections(detections)
     joints_of = class_joints(model, detections["colour_names"])
     start, points0 = start_frame(centres, areas, joints_of, p, float(detections["fps"]))
-    points, tracked = run_passes(
+    points, tracked, doubt = run_passes(
         frame_candidates(centres), len(centres), start, points0, lambda p0: KalmanTracker(p0, joints_of, p)
     )
-    return {"tracks": tracks_bundle(points, tracked, detections)}
+    return {"tracks": tracks_bundle(points, tracked, detections, doubt)}
