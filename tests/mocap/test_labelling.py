@@ -158,3 +158,81 @@ def test_left_right_suit_reacquired_after_a_turn(seed_model, facing):
     for j in range(1, N_JOINTS):
         d = np.linalg.norm(out["points"][:, j] - out["points"][:, PARENTS[j]], axis=1)
         assert d.max() < 1.3 * np.linalg.norm(p0[j] - p0[PARENTS[j]]) + 25.0, j
+
+
+# --------------------------------------------------------------------------------------------
+# per-frame honesty: doubtful ranges in metrics.json, on the error plot and the overlay; long gaps flagged
+def test_doubtful_ranges_from_tracks_and_unfilled_gaps():
+    from tbha_graph.mocap.evaluate.doubtful import REASONS, doubtful_bits, doubtful_ranges
+
+    n = 30
+    tracks = {"doubtful": np.zeros(n, np.uint8)}
+    tracks["doubtful"][5:9] = DOUBT["lost joints"]
+    tracks["doubtful"][7] |= DOUBT["ambiguous identity"]
+    motion = {"tracked": np.ones((n, N_JOINTS), bool), "inferred": np.zeros((n, N_JOINTS), bool)}
+    motion["tracked"][20:26, 3] = False  # not filled either
+    motion["tracked"][12:14, 4] = False
+    motion["inferred"][12:14, 4] = True  # filled: not doubtful
+    reproj = np.full(n, 2.0)
+    reproj[28] = 40.0
+    bits = doubtful_bits(n, tracks, motion, reproj)
+    assert doubtful_ranges(bits) == [[5, 8, "lost joints"], [7, 7, "ambiguous identity"], [20, 25, "unfilled gap"],
+                                     [28, 28, "high reprojection"]]
+    assert set(REASONS) >= set(DOUBT)
+
+
+def test_fill_gaps_flags_the_gaps_it_leaves():
+    from tbha_graph.mocap.filter.fill_gaps import fill_gaps
+
+    n = 60
+    t = np.arange(n)[:, None, None] * 0.01
+    joints = np.repeat(np.linspace(0, 1, N_JOINTS * 3).reshape(1, N_JOINTS, 3), n, 0) + t
+    tracked = np.ones((n, N_JOINTS), bool)
+    tracked[10:14, J["left_wrist"]] = False  # short: filled
+    tracked[20:50, J["left_ankle"]] = False  # long: left and flagged
+    tracked[55:, J["right_wrist"]] = False  # at the end: left and flagged
+    out = run_node(fill_gaps, {"max_gap_frames": 15}, motion={"joints": joints, "fps": np.array(30.0), "tracked": tracked})
+    assert out["report"]["long_gaps"] == [["left_ankle", 20, 49], ["right_wrist", 55, 59]]
+    assert out["motion"]["inferred"][10:14, J["left_wrist"]].all()
+
+
+def test_metrics_error_plot_and_overlay_show_doubtful_frames(tmp_path):
+    import cv2
+
+    from tbha_graph.mocap.camera import Camera
+    from tbha_graph.mocap.evaluate.metrics import metrics
+    from tbha_graph.mocap.io.video import probe_video
+    from tbha_graph.mocap.io.video_writer import open_video_writer
+    from tbha_graph.mocap.skeleton import tpose
+    from tbha_graph.mocap.viz import draw, style
+    from tbha_graph.mocap.viz.error_plot import plot_errors
+    from tbha_graph.mocap.viz.overlay import OverlayLayers, draw_overlay
+
+    n, W, H = 12, 320, 240
+    joints = np.repeat(tpose()[None], n, 0)
+    cam = Camera.look_at((0.0, 1.0, 4.0), (0.0, 0.9, 0.0), focal_px=300.0, width=W, height=H)
+    doubt = np.zeros(n, np.uint8)
+    doubt[4:7] = DOUBT["few patches"]
+    tracks = {"points": cam.project(joints), "tracked": np.ones((n, N_JOINTS), bool), "fps": np.array(30.0),
+              "width": np.array(W), "height": np.array(H), "doubtful": doubt}
+    out = run_node(metrics, motion={"joints": joints, "fps": np.array(30.0)}, tracks=tracks, camera=cam.to_model())
+    assert out["metrics"]["doubtful_ranges"] == [[4, 6, "few patches"]]
+    np.testing.assert_array_equal(out["errors"]["doubtful"] > 0, doubt > 0)
+    # the error plot shades the doubtful frames (orange) and says so in its legend
+    png = plot_errors(out["errors"], tmp_path / "e.png")
+    img = cv2.imread(str(png))
+    orange = np.abs(img.astype(int) - (np.array(style.DOUBTFUL_BGR) * 0.18 + 255 * 0.82)).max(-1) <= 6
+    assert orange.sum() > 1000
+    plain = plot_errors({**out["errors"], "doubtful": np.zeros(n)}, tmp_path / "p.png")
+    img2 = cv2.imread(str(plain))
+    assert (np.abs(img2.astype(int) - (np.array(style.DOUBTFUL_BGR) * 0.18 + 255 * 0.82)).max(-1) <= 6).sum() < 50
+    # the overlay frames it in orange with the reason on doubtful frames only
+    path = tmp_path / "grey.mp4"
+    with open_video_writer(path, 30.0, W, H, codec="mp4v") as w:
+        for _ in range(n):
+            w.write(np.full((H, W, 3), 90, np.uint8))
+    layers = OverlayLayers(n, probe_video(path), tracks, None, None, None, True)
+    sizes = draw.Sizes(dot=4, line=2, font=0.4)
+    for i, flagged in ((5, True), (1, False)):
+        frame = draw_overlay(np.full((H, W, 3), 90, np.uint8), i, layers, sizes)
+        assert tuple(frame[H - 1, W // 2]) == (style.DOUBTFUL_BGR if flagged else (90, 90, 90))

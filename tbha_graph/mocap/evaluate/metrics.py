@@ -28,6 +28,9 @@ With ground truth (``truth`` connected and not ``{}``):
 * ``raw_mpjpe_mm``, ``raw_accel_error_m_s2`` for ``raw_motion`` (same alignment, fitted separately).
 * ``per_joint_mpjpe_mm``: nested ``{joint name: mm}`` (aligned, as ``mpjpe_mm``).
 
+``doubtful_ranges``: ``[[first, last, reason], ...]`` frames whose labelling or result is doubtful
+(:mod:`tbha_graph.mocap.evaluate.doubtful`); the ``errors`` bundle gets the per-frame bits as ``doubtful``.
+
 A figure that cannot be computed (e.g. jitter of a clip shorter than 4 frames) is ``null``.
 
 Output ``errors`` (per frame, NaN where unavailable): ``mpjpe_mm``, ``mpjpe_root_mm``, ``pa_mpjpe_mm``,
@@ -48,6 +51,7 @@ from ..io.ground_truth import TRUTH, check_ground_truth, truth_joints2d, truth_v
 from ..ports import CAMERA, METRICS, MOTION, TRACKS2D
 from ..skeleton import JOINT_NAMES, N_JOINTS, PATCHED_JOINTS
 from . import measures as m
+from .doubtful import doubtful_bits, doubtful_ranges
 
 _PER_FRAME = Array("float", ("n_frames",))
 ERRORS = Arrays(
@@ -172,6 +176,9 @@ def compute_metrics(
     nan = np.full(n, np.nan)
     errors = {"mpjpe_mm": nan, "mpjpe_root_mm": nan, "pa_mpjpe_mm": nan, "error_2d_px": nan, "reprojection_px": reproj,
               "fps": np.asarray(fps, dtype=np.float64)}
+    doubt = doubtful_bits(n, tracks, motion, reproj)  # issue 13: frames whose labelling/result is doubtful
+    metrics["doubtful_ranges"] = doubtful_ranges(doubt)
+    errors["doubtful"] = doubt.astype(np.float64)
 
     raw = None
     if raw_motion is not None:

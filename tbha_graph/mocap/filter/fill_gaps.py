@@ -8,9 +8,11 @@ Two fills, in order, on joints whose ``tracked`` flag is False:
    is fully tracked onto the tracked ones (the nearest frame, because the shoulders shrug).
 2. **Interpolation** (shape-preserving cubic, PCHIP) across interior gaps of at most ``max_gap_frames``.
 
-Longer gaps and gaps at the start or end of the take are **left missing**: their positions stay what
-the solver predicted, ``tracked`` stays False and ``inferred`` stays False. Output MOTION gains
-``inferred`` ``(n_frames, 16)`` bool; ``report`` counts filled and missing samples per joint.
+Longer gaps and gaps at the start or end of the take are **left missing and flagged**, not invented:
+their positions stay what the solver predicted, ``tracked`` stays False and ``inferred`` stays False;
+``report["long_gaps"]`` lists them as ``[joint, first, last]`` (rows, ``last`` included) and
+``evaluate.metrics`` reports their frames in ``doubtful_ranges`` (reason ``unfilled gap``). Output MOTION
+gains ``inferred`` ``(n_frames, 16)`` bool; ``report`` counts filled and missing samples per joint.
 """
 from __future__ import annotations
 
@@ -115,6 +117,16 @@ def interpolate_gaps(joints: np.ndarray, known: np.ndarray, max_gap: int) -> np.
     return filled
 
 
+def missing_runs(missing: np.ndarray) -> list[list]:
+    """``[[joint name, first, last], ...]``: the runs of ``missing`` (n, 16) per joint, by first frame."""
+    out = []
+    for j in range(missing.shape[1]):
+        edges = np.diff(np.concatenate([[0], missing[:, j].astype(np.int8), [0]]))
+        for s, e in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+            out.append([JOINT_NAMES[j], int(s), int(e - 1)])
+    return sorted(out, key=lambda r: (r[1], r[2], r[0]))
+
+
 @node(
     "filter.fill_gaps",
     version=1,
@@ -141,5 +153,9 @@ def fill_gaps(ctx, motion):
         "inferred_pct": round(100.0 * float(inferred.mean()), 3),
         "per_joint_inferred": {JOINT_NAMES[j]: int(inferred[:, j].sum()) for j in range(len(JOINT_NAMES)) if inferred[:, j].any()},
         "per_joint_missing": {JOINT_NAMES[j]: int(missing[:, j].sum()) for j in range(len(JOINT_NAMES)) if missing[:, j].any()},
+        "long_gaps": missing_runs(missing),
     }
+    if report["long_gaps"]:
+        ctx.log(f"{len(report['long_gaps'])} gap(s) longer than {ctx.params.max_gap_frames} frames (or at the take's "
+                f"ends) left unfilled and flagged, e.g. {report['long_gaps'][0]}")
     return {"motion": out, "report": report}

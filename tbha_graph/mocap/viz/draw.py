@@ -110,3 +110,12 @@ def draw_counter(img: np.ndarray, text: str, sizes: Sizes) -> None:
     h = img.shape[0]
     _shade(img, 0, h - th - base - 12, tw + 16, h)
     _text(img, text, (8, h - base - 6), sizes.font)
+
+
+def draw_flag(img: np.ndarray, text: str, color, sizes: Sizes) -> None:
+    """A ``color`` border round the frame and ``text`` on a shaded band in the top-right corner."""
+    h, w = img.shape[:2]
+    cv2.rectangle(img, (0, 0), (w - 1, h - 1), color, max(2, sizes.line + 1))
+    (tw, th), base = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, sizes.font, 1)
+    _shade(img, w - tw - 16, 0, w, th + base + 12)
+    _text(img, text, (w - tw - 8, th + 6), sizes.font, color)

@@ -5,7 +5,9 @@ With ground truth: top panel, 3D joint error in mm (``mpjpe_mm`` after the clip 
 ``pa_mpjpe_mm`` dashed); bottom panel, 2D error in px (``error_2d_px``, tracks vs truth) and the
 reprojection error in px (``reprojection_px``, 3D motion projected vs tracks). Without ground truth
 (``mpjpe_mm`` all NaN): one panel, the reprojection error. The x axis is time in seconds (frame / fps);
-each legend entry gives the curve's median. Gaps (NaN) are left as breaks in the curves.
+each legend entry gives the curve's median. Gaps (NaN) are left as breaks in the curves. Frames whose
+labelling is doubtful (``doubtful`` in the bundle, see :mod:`tbha_graph.mocap.evaluate.doubtful`) are
+shaded orange in every panel.
 """
 from __future__ import annotations
 
@@ -64,11 +66,18 @@ def plot_errors(errors: dict, path, title: str = "", dpi: int = 120):
     ax2.set_ylabel("2D error (px)")
     ax2.set_title("2D: mean pixel error of the frame's joints", fontsize=10, loc="left")
     ax2.set_xlabel(f"time (s) — {n} frames at {fps:.4g} fps")
+    doubt = np.asarray(errors.get("doubtful", np.zeros(n)), dtype=np.float64).reshape(-1)
+    if doubt.shape == (n,) and (doubt > 0).any():
+        edges = np.diff(np.concatenate([[0], (doubt > 0).astype(np.int8), [0]]))  # runs of doubtful frames
+        for k, (first, last) in enumerate(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1)):
+            for ax in axes:  # a run covers its frames' whole intervals
+                ax.axvspan((first - 0.5) / fps, (last + 0.5) / fps, color=style.rgb(style.DOUBTFUL_BGR), alpha=0.18, lw=0,
+                           label="doubtful labelling" if (k == 0 and ax is axes[0]) else None)
     for ax in axes:
         ax.set_xlim(0.0, max(t[-1], 1.0 / fps))
         ax.set_ylim(bottom=0.0)
         ax.grid(True, alpha=0.3)
-        if ax.lines:
+        if ax.lines or ax.patches:
             ax.legend(loc="upper right", fontsize=8)
     fig.suptitle(title or ("Per-frame error of the capture" if has_truth else "Per-frame reprojection error (no ground truth)"))
     return save_png(fig, path, dpi)

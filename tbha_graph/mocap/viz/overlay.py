@@ -7,7 +7,9 @@ Layers, bottom to top (colours in :mod:`tbha_graph.mocap.viz.style`):
   prediction) as hollow circles;
 * ground truth (optional ``truth``): thin green crosses at the truth's ``joints2d`` (rescaled to the
   video size), wider than the dots so they show where the tracks are right;
-* a legend (top left) and a frame counter with the time (bottom left).
+* a legend (top left) and a frame counter with the time (bottom left);
+* on frames the tracker flags doubtful (the tracks' ``doubtful``, see
+  :mod:`tbha_graph.mocap.evaluate.doubtful`): an orange frame border and the reasons (top right).
 
 Frames are streamed one at a time (never the whole video in memory) and written with
 :func:`tbha_graph.mocap.io.video_writer.open_video_writer` (H.264 with PyAV, else mp4v with a logged note).
@@ -70,6 +72,9 @@ class OverlayLayers:
             with np.errstate(divide="ignore", invalid="ignore"):
                 proj = cam.project(joints)
             self.reprojected = np.where((cam.to_camera(joints)[..., 2] > 1e-9)[..., None], proj, np.nan)
+        self.doubtful = None
+        if "doubtful" in tracks and np.shape(tracks["doubtful"]) == (n,):
+            self.doubtful = np.asarray(tracks["doubtful"], dtype=np.int64)
         self.truth2d = None
         if truth and draw_truth:
             gt = truth_joints2d(truth, clip.width, clip.height)
@@ -94,6 +99,10 @@ def draw_overlay(frame: np.ndarray, i: int, layers: OverlayLayers, sizes: draw.S
     draw.draw_dots(frame, layers.points[i], layers.tracked[i], style.TRACKS_BGR, sizes.dot, sizes.line)
     if layers.truth2d is not None:  # thin crosses on top, reaching beyond the dots: visible where the tracks are right
         draw.draw_markers(frame, layers.truth2d[i], style.TRUTH_BGR, 2 * sizes.dot + 8, 1)
+    if layers.doubtful is not None and layers.doubtful[i]:
+        from ..evaluate.doubtful import reason_names
+
+        draw.draw_flag(frame, "doubtful: " + ", ".join(reason_names(int(layers.doubtful[i]))), style.DOUBTFUL_BGR, sizes)
     return frame
 
 

@@ -19,6 +19,8 @@ CENTRE_BGR = (40, 40, 40)
 #: curves in plots (on white): 3D error dark blue; the tracks' colour darkened to gold for contrast
 ERROR3D_BGR = (160, 80, 0)
 TRACKS_PLOT_BGR = (0, 160, 210)
+#: frames whose labelling is doubtful (issue 13): orange
+DOUBTFUL_BGR = (0, 120, 255)
 
 
 def rgb(bgr: tuple[int, int, int]) -> tuple[float, float, float]:
