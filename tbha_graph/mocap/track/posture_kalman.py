@@ -142,6 +142,7 @@ class KalmanTracker:
 
         # joints seen, to anchor lost ones: placed in this frame, else tracked in the previous one
         seen = {j: (kf_pred[j], p.gate_px) for j in range(N_JOINTS) if self.unseen[j] == 0}
+        merged: set[int] = set()  # joints whose patch merged with a same-coloured one in this frame
         for c in body.class_order:
             J = self.joints_of[c]
             if not J:
@@ -182,9 +183,24 @@ class KalmanTracker:
                     norm = p.max_gate_px
                 else:  # a limb with nothing seen to hang from: its identity would be a guess; wait
                     continue
-                cost[r, :k] = np.where(ok, 0.5 * np.minimum(dist / norm, 1.0), _INF)
+                # a lost joint's candidate costs more than a followed one's (0.5..1): it never steals one
+                cost[r, :k] = np.where(ok, 0.5 + 0.45 * np.minimum(dist / norm, 1.0), _INF)
             rows, cols = linear_sum_assignment(cost)
             got = {int(r): int(col) for r, col in zip(rows, cols) if col < k and cost[r, col] < _INF}
+            if m == 2 and k >= 1 and not lost[J[0]] and not lost[J[1]] and len(got) < 2:
+                # two same-coloured patches seen last frame, one blob within both gates: merged (crossing or
+                # touching). Its centre is neither: both keep their constant-velocity predictions
+                both = (cost[0, :k] < _INF) & (cost[1, :k] < _INF)
+                if both.any() and np.linalg.norm(pred[0] - pred[1]) < gate[0] + gate[1]:
+                    got = {r: col for r, col in got.items() if not both[col]}
+                    merged.update(J)
+                    doubt |= DOUBT["ambiguous identity"]
+            if m == 2 and k >= 1 and lost[J[0]] and lost[J[1]]:
+                # both lost: a blob either could be, about as well, is left until they can be told apart
+                both = (cost[0, :k] < _INF) & (cost[1, :k] < _INF) & (np.abs(cost[0, :k] - cost[1, :k]) < 0.05)
+                if both.any():
+                    got = {r: col for r, col in got.items() if not both[col]}
+                    doubt |= DOUBT["ambiguous identity"]
             if k >= 2 and len(J) == 2:
                 # facing for a torso mirror pair: the chest patch (front of the suit) seen -> facing the camera;
                 # lost while the pair comes back -> the back is turned; else as last seen
@@ -216,7 +232,8 @@ class KalmanTracker:
                     kf.correct(points[j].astype(np.float32).reshape(2, 1))
             else:
                 s = kf.statePost
-                s[2:] *= p.velocity_decay
+                if j not in merged:  # a merged patch keeps moving as it did
+                    s[2:] *= p.velocity_decay
                 if self.unseen[j] + 1 > p.lost_after_frames:  # lost: the filter follows the body's estimate
                     s[0, 0], s[1, 0] = points[j]
                     s[2:] = 0.0
