@@ -155,6 +155,7 @@ class KalmanTracker:
             # costs are distances over the joint's gate (<= 1 inside it); "not visible" costs 1 for every joint
             cost = np.full((m, k + m), _INF)
             cost[np.arange(m), k + np.arange(m)] = 1.0
+            expected_dist = np.full((m, k), np.inf)  # lost joints: px from where the body expects them
             for r, j in enumerate(J):
                 P, u = anchor[r]
                 if not lost[j]:
@@ -185,6 +186,7 @@ class KalmanTracker:
                     continue
                 # a lost joint's candidate costs more than a followed one's (0.5..1): it never steals one
                 cost[r, :k] = np.where(ok, 0.5 + 0.45 * np.minimum(dist / norm, 1.0), _INF)
+                expected_dist[r] = dist
             rows, cols = linear_sum_assignment(cost)
             got = {int(r): int(col) for r, col in zip(rows, cols) if col < k and cost[r, col] < _INF}
             if m == 2 and k >= 1 and not lost[J[0]] and not lost[J[1]] and len(got) < 2:
@@ -197,7 +199,9 @@ class KalmanTracker:
                     doubt |= DOUBT["ambiguous identity"]
             if m == 2 and k >= 1 and lost[J[0]] and lost[J[1]]:
                 # both lost: a blob either could be, about as well, is left until they can be told apart
-                both = (cost[0, :k] < _INF) & (cost[1, :k] < _INF) & (np.abs(cost[0, :k] - cost[1, :k]) < 0.05)
+                with np.errstate(invalid="ignore"):  # inf - inf: not comparable, not ambiguous
+                    close = np.abs(expected_dist[0] - expected_dist[1]) < 0.25 * p.gate_px
+                both = (cost[0, :k] < _INF) & (cost[1, :k] < _INF) & close
                 if both.any():
                     got = {r: col for r, col in got.items() if not both[col]}
                     doubt |= DOUBT["ambiguous identity"]
