@@ -78,7 +78,7 @@ class BodyBounds:
         r = self.reach(j)
         return off * (r / n) if n > r else off
 
-    def anchor(self, j: int, seen: dict[int, tuple[np.ndarray, float]], max_bones: int = 4):
+    def anchor(self, j: int, seen: dict[int, tuple[np.ndarray, float]], max_bones: int = 2):
         """The nearest joint seen (``seen``: joint -> (point, slack px)) along the bones from ``j``:
         ``(point, reach, pred)`` = its point, how far ``j`` can be from it (reaches along the path plus
         its slack) and where ``j`` is expected (its point plus the offsets along the path); None if no
