@@ -19,7 +19,9 @@ renderer's truth of which patch is where (``patch2d``, ``patch_visible``):
   reappearances by the render's visibility alone.
 * ``off_body_pct=``: of all (frame, joint) 2D points the tracker output (tracked or predicted), % farther
   from their parent joint's point than the bone could reach in the image (bone length + 0.15 m of
-  patch offsets, at the nearer of the two joints' true depths).
+  patch offsets, at the nearer of the two joints' true depths); ``off_body_placed_pct=``: the same over
+  the bones with an end the tracker placed (not measured). The tracker knows no depth: it bounds placed
+  points by the bone lengths seen at the start, scaled by the torso's size when last seen.
 * ``seq_mpjpe_mm=``: the final 3D motion vs the truth after ONE rigid alignment over the whole take
   (rotation + translation, no scale), turn included; ``seq_mpjpe_true_camera_mm=``: the same capture
   with the render's true camera instead of the T-pose calibration (``calibrate.known``), to separate
@@ -146,9 +148,11 @@ def label_scores(tracks: dict, truth: dict, radius_m: float, detected: np.ndarra
     }
 
 
-def off_body(tracks: dict, truth: dict) -> tuple[int, int]:
-    """(count, total) of 2D points farther from their parent's point than the bone can reach."""
+def off_body(tracks: dict, truth: dict, placed_only: bool = False) -> tuple[int, int]:
+    """(count, total) of 2D points farther from their parent's point than the bone can reach
+    (``placed_only``: bones with an end the tracker placed, not measured)."""
     pts = np.asarray(tracks["points"], dtype=np.float64)
+    trk = np.asarray(tracks["tracked"], dtype=bool)
     z = (np.einsum("ij,ntj->nti", truth["R"], truth["joints3d_world"]) + truth["t"])[..., 2]
     f = float(truth["K"][0, 0])
     L = np.asarray(truth["bone_lengths"], dtype=np.float64)
@@ -158,8 +162,9 @@ def off_body(tracks: dict, truth: dict) -> tuple[int, int]:
         dist = np.linalg.norm(pts[:, j] - pts[:, p], axis=1)
         reach = f * (L[j] + 0.15) / np.maximum(np.minimum(z[:, j], z[:, p]) - 0.15, 0.3)
         ok = np.isfinite(dist)
-        count += int((dist[ok] > reach[ok]).sum()) + int((~ok).sum())
-        total += len(dist)
+        use = ~(trk[:, j] & trk[:, p]) if placed_only else np.ones(len(dist), bool)
+        count += int((dist[ok & use] > reach[ok & use]).sum()) + int((~ok & use).sum())
+        total += int(use.sum())
     return count, total
 
 
@@ -214,12 +219,13 @@ def run_take(take: str, suit: str, keep: Path | None) -> dict:
     det = {k: np.asarray(v) for k, v in run.output("segment.detections").items()}
     s = label_scores(tracks, truth, spec.patch_radius, detected_patches(det, truth, spec, spec.patch_radius))
     ob, tot = off_body(tracks, truth)
+    obp, totp = off_body(tracks, truth, placed_only=True)
     return {
         "take": take, "suit": suit, "frames": len(gt), "turn_deg": heading_range_deg(gt), "seq_mpjpe_mm": seq,
         "seq_mpjpe_true_camera_mm": true_camera_seq_mpjpe(sets, vars, truth),
         "visible": s["visible"], "wrong": s["wrong"], "missed": s["missed"], "delays": s["delays"],
         "delays_detected": s["delays_detected"],
-        "off_body": ob, "points": tot, "seconds": seconds,
+        "off_body": ob, "points": tot, "off_body_placed": obp, "points_placed": totp, "seconds": seconds,
         "doubtful_ranges": metrics.get("doubtful_ranges"), "wrong_frames": s["wrong_frames"].tolist(),
     }
 
@@ -243,11 +249,18 @@ def main(argv: list[str] | None = None) -> None:
                   f"missed_pct={100.0 * r['missed'] / max(r['visible'], 1):.2f} "
                   f"reacquire_events={d.size} reacquire_frames_p95={np.percentile(d, 95) if d.size else 0:.1f} "
                   f"reacquire_frames_p95_truth_visible={np.percentile(dv, 95) if dv.size else 0:.1f} "
-                  f"off_body_pct={100.0 * r['off_body'] / r['points']:.2f} seq_mpjpe_mm={r['seq_mpjpe_mm']:.1f} "
+                  f"off_body_pct={100.0 * r['off_body'] / r['points']:.2f} "
+                  f"off_body_placed_pct={100.0 * r['off_body_placed'] / max(r['points_placed'], 1):.2f} "
+                  f"seq_mpjpe_mm={r['seq_mpjpe_mm']:.1f} "
                   f"seq_mpjpe_true_camera_mm={r['seq_mpjpe_true_camera_mm']:.1f} "
                   f"seconds={r['seconds']:.0f}", flush=True)
             if a.verbose:
                 print(f"  wrong_frames={r['wrong_frames']}\n  doubtful_ranges={json.dumps(r['doubtful_ranges'])}", flush=True)
+    for suit in a.suits:  # per suit kind
+        rs = [r for r in rows if r["suit"] == suit]
+        d = np.asarray([x for r in rs for x in r["delays_detected"]])
+        print(f"suit={suit} identity_error_pct={100.0 * sum(r['wrong'] for r in rs) / max(sum(r['visible'] for r in rs), 1):.2f} "
+              f"reacquire_frames_p95={np.percentile(d, 95) if d.size else 0:.1f}")
     vis = sum(r["visible"] for r in rows)
     delays = np.asarray([x for r in rows for x in r["delays_detected"]])
     delays_v = np.asarray([x for r in rows for x in r["delays"]])
@@ -256,6 +269,7 @@ def main(argv: list[str] | None = None) -> None:
     print(f"reacquire_frames_p95={np.percentile(delays, 95) if delays.size else 0:.1f}")
     print(f"reacquire_frames_p95_truth_visible={np.percentile(delays_v, 95) if delays_v.size else 0:.1f}")
     print(f"off_body_pct={100.0 * sum(r['off_body'] for r in rows) / sum(r['points'] for r in rows):.2f}")
+    print(f"off_body_placed_pct={100.0 * sum(r['off_body_placed'] for r in rows) / max(sum(r['points_placed'] for r in rows), 1):.2f}")
     print(f"seq_mpjpe_mm_max={max(r['seq_mpjpe_mm'] for r in rows):.1f}")
     print(f"seq_mpjpe_true_camera_mm_max={max(r['seq_mpjpe_true_camera_mm'] for r in rows):.1f}")
 

@@ -39,7 +39,7 @@ from ...core.types import Json
 from ..color.model import as_color_model
 from ..ports import TRACKS2D
 from ..segment.detections import DETECTIONS
-from ..skeleton import JOINT_INDEX, N_JOINTS, PARENTS
+from ..skeleton import JOINT_INDEX, JOINT_NAMES, N_JOINTS, PARENTS
 from .body import BodyBounds
 from .common import (DOUBT, StartParams, check_detections, class_joints, frame_candidates, run_passes, start_frame,
                      tracks_bundle)
@@ -152,6 +152,7 @@ class KalmanTracker:
             pred = np.empty((m, 2))
             gate = np.empty(m)
             anchor = [parent_of(j) for j in J]
+            mirrored = m == 2 and frozenset(JOINT_NAMES[j].split("_", 1)[-1] for j in J).__len__() == 1
             # costs are distances over the joint's gate (<= 1 inside it); "not visible" costs 1 for every joint
             cost = np.full((m, k + m), _INF)
             cost[np.arange(m), k + np.arange(m)] = 1.0
@@ -178,11 +179,12 @@ class KalmanTracker:
                     dist = np.linalg.norm(det - expected, axis=1)
                     ok = np.linalg.norm(det - point, axis=1) <= reach
                     norm = reach + p.gate_px
-                elif j in TORSO:  # nothing seen to hang from (a torso seen again after a turn):
-                    dist = np.linalg.norm(det - pred[r], axis=1)  # the nearest to where the body last had it
+                elif j in TORSO or not mirrored:  # nothing seen to hang from (a torso seen again after a
+                    # turn; a patch whose colour no mirror twin wears): the nearest to where the body had it
+                    dist = np.linalg.norm(det - pred[r], axis=1)
                     ok = dist <= p.max_gate_px
                     norm = p.max_gate_px
-                else:  # a limb with nothing seen to hang from: its identity would be a guess; wait
+                else:  # a left/right patch with nothing seen to hang from: either side is a guess; wait
                     continue
                 # a lost joint's candidate costs more than a followed one's (0.5..1): it never steals one
                 cost[r, :k] = np.where(ok, 0.5 + 0.45 * np.minimum(dist / norm, 1.0), _INF)
