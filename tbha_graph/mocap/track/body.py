@@ -60,9 +60,11 @@ class BodyBounds:
         self.offset_scale = np.ones(N_JOINTS)
         self.scale = 1.0
         self.facing = 1.0
-        # classes whose joints hang lower in the tree come later, so that parents are placed first
+        # classes whose joints hang lower in the tree come later, so that parents are placed first (the
+        # root's class first; then by the shallowest, then the deepest joint; single-patch colours first)
         depths = [[_depth(j) for j in js] or [99] for js in joints_of]
-        self.class_order = sorted(range(len(joints_of)), key=lambda c: (max(depths[c]), min(depths[c]), c))
+        self.class_order = sorted(range(len(joints_of)),
+                                  key=lambda c: (min(depths[c]), max(depths[c]), len(joints_of[c]), c))
 
     def reach(self, j: int) -> float:
         """Farthest (px) joint ``j``'s patch can be from its parent's patch in the image now."""

@@ -40,7 +40,7 @@ from ..color.model import as_color_model
 from ..ports import TRACKS2D
 from ..segment.detections import DETECTIONS
 from ..skeleton import JOINT_INDEX, JOINT_NAMES, N_JOINTS, PARENTS
-from .body import BodyBounds
+from .body import TORSO_MIRRORS, BodyBounds
 from .common import (DOUBT, StartParams, check_detections, class_joints, frame_candidates, run_passes, start_frame,
                      tracks_bundle)
 
@@ -189,6 +189,20 @@ class KalmanTracker:
                 # a lost joint's candidate costs more than a followed one's (0.5..1): it never steals one
                 cost[r, :k] = np.where(ok, 0.5 + 0.45 * np.minimum(dist / norm, 1.0), _INF)
                 expected_dist[r] = dist
+            # facing for a torso mirror pair: the chest patch (front of the suit) seen -> facing the camera;
+            # lost while the pair comes back -> the back is turned; else as last seen
+            facing = None if not done[CHEST] else (
+                1.0 if tracked[CHEST] else (-1.0 if lost[CHEST] and all(lost[J]) else None))
+            if mirrored and k and frozenset(J) in TORSO_MIRRORS:
+                # a left/right pair on the torso: while its middle patch (chest, hips) is seen, the left one
+                # is on the image's right of it facing the camera, on its left with the back turned
+                mid = int(PARENTS[J[0]])
+                if done[mid] and tracked[mid]:
+                    facing_now = body.facing if facing is None else facing
+                    for r, j in enumerate(J):
+                        side = 1.0 if JOINT_NAMES[j].startswith("left") else -1.0
+                        wrong_side = facing_now * side * (det[:, 0] - points[mid, 0]) < -p.measurement_noise * 2
+                        cost[r, :k] = np.where(wrong_side, _INF, cost[r, :k])
             rows, cols = linear_sum_assignment(cost)
             got = {int(r): int(col) for r, col in zip(rows, cols) if col < k and cost[r, col] < _INF}
             if m == 2 and k >= 1 and not lost[J[0]] and not lost[J[1]] and len(got) < 2:
@@ -208,9 +222,6 @@ class KalmanTracker:
                     got = {r: col for r, col in got.items() if not both[col]}
                     doubt |= DOUBT["ambiguous identity"]
             if k >= 2 and len(J) == 2:
-                # facing for a torso mirror pair: the chest patch (front of the suit) seen -> facing the camera;
-                # lost while the pair comes back -> the back is turned; else as last seen
-                facing = 1.0 if tracked[CHEST] else (-1.0 if lost[CHEST] and all(lost[J]) else None)
                 got, ambiguous = body.resolve_pair(J, det, got, cost, lost, facing)
                 if ambiguous:
                     doubt |= DOUBT["ambiguous identity"]
