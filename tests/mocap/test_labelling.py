@@ -119,7 +119,8 @@ def test_lost_joint_follows_the_body_never_off_it(default_model):
     visible = np.ones((n, N_JOINTS), bool)
     hidden = np.arange(10, 50)
     visible[hidden, J["left_wrist"]] = False
-    out = run_node(posture_kalman, detections=_detections(default_model, truth, visible), colors=default_model)["tracks"]
+    out = run_node(posture_kalman, {"doubt_lost_joints": 1}, detections=_detections(default_model, truth, visible),
+                   colors=default_model)["tracks"]
     assert not out["tracked"][hidden, J["left_wrist"]].any()
     forearm = np.linalg.norm(truth[0, J["left_wrist"]] - truth[0, J["left_elbow"]])
     reach = np.linalg.norm(out["points"][:, J["left_wrist"]] - out["points"][:, J["left_elbow"]], axis=1)

@@ -4,8 +4,8 @@ Reasons (bits of a per-frame ``int``; the first four come from the tracker's ``d
 :data:`tbha_graph.mocap.track.common.DOUBT`):
 
 * ``few patches``: fewer patches tracked than the tracker's ``min_patches``;
-* ``lost joints``: some joint unseen for longer than the tracker's ``lost_after_frames`` (placed from
-  the body, not measured);
+* ``lost joints``: at least the tracker's ``doubt_lost_joints`` (3) joints unseen for longer than its
+  ``lost_after_frames`` (placed from the body, not measured);
 * ``ambiguous identity``: two same-coloured patches could be either joint about as well, or were told
   apart by the body's facing only;
 * ``high residual``: the tracked patches were far from where the tracker predicted them;

@@ -23,7 +23,8 @@ pairs (the seed's suit) by their image order. Later frames (seed: "continuity of
 
 ``points`` hold the detected centres where tracked (the filter is used for association only; smoothing
 is a downstream filter's job). ``doubtful`` (n,) uint8 flags each frame whose labelling is doubtful
-(bits of :data:`.common.DOUBT`): fewer than ``min_patches`` patches tracked, lost joints, an ambiguous
+(bits of :data:`.common.DOUBT`): fewer than ``min_patches`` patches tracked, at least
+``doubt_lost_joints`` joints lost, an ambiguous
 identity (a same-coloured pair either way about as good, or decided by the facing), or tracked patches
 far (median > ``residual_px``) from their predictions.
 """
@@ -77,6 +78,10 @@ class PostureKalmanParams(StartParams):
     )
     min_patches: int = Field(
         10, ge=0, le=15, description="frames with fewer of the 15 patches tracked are reported doubtful"
+    )
+    doubt_lost_joints: int = Field(
+        3, ge=1, le=16, description="frames with at least this many lost joints are reported doubtful (one patch "
+                                    "hidden for a while is normal in a side view)"
     )
     residual_px: float = Field(
         12.0, gt=0, description="frames whose tracked patches are this far (median) from their predictions are "
@@ -260,7 +265,7 @@ class KalmanTracker:
         patched = [j for j in range(N_JOINTS) if j != HEAD]
         if tracked[patched].sum() < p.min_patches:
             doubt |= DOUBT["few patches"]
-        if (self.unseen > p.lost_after_frames).any():
+        if (self.unseen > p.lost_after_frames).sum() >= p.doubt_lost_joints:
             doubt |= DOUBT["lost joints"]
         if residuals and float(np.median(residuals)) > p.residual_px:
             doubt |= DOUBT["high residual"]
