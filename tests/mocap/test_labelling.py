@@ -279,3 +279,24 @@ def test_seed_suit_sample_labelled_through_the_swing(seed_model):
         reach = gt["K"][0, 0] * (gt["bone_lengths"][j] + 0.15) / (np.minimum(zj[:, j], zj[:, p]) - 0.15)
         far = np.linalg.norm(out["points"][:, j] - out["points"][:, p], axis=1) > reach
         assert far.sum() <= 2, (j, np.flatnonzero(far))
+
+
+def test_body_scale_follows_the_head_while_the_torso_is_hidden():
+    """Walking away with the back turned: no torso pair is seen, the head's blob shrinks; the body's
+    scale (and so every placed joint's reach) shrinks with it, at most 3 % a frame."""
+    from tbha_graph.mocap.track.body import BodyBounds
+
+    p0 = tpose_points()
+    body = BodyBounds(p0, [[j] for j in range(N_JOINTS)])
+    seen = np.ones(N_JOINTS, bool)
+    for _ in range(5):
+        body.observe(p0, seen, head_area=400.0)  # torso seen: the head's area at scale 1 is learnt
+    reach0 = body.reach(J["left_knee"])
+    only_head = np.zeros(N_JOINTS, bool)
+    only_head[J["head"]] = True
+    for _ in range(30):
+        body.observe(p0, only_head, head_area=400.0 * 0.7**2)  # 30 % smaller
+    assert body.scale == pytest.approx(0.7, abs=0.01)
+    assert body.reach(J["left_knee"]) == pytest.approx(0.7 * reach0, rel=0.02)
+    body.observe(p0, only_head, head_area=400.0)  # a jump back is limited to 3 % a frame
+    assert body.scale == pytest.approx(0.7 * 1.03, abs=0.01)

@@ -5,6 +5,8 @@ the actor facing the camera) and kept up to date with the tracked points:
 
 * ``scale``: the body's size in the image relative to the start (torso height and shoulder width,
   whichever is larger: turning shortens the width, bending the height); it shrinks at most 3 % a frame.
+  While no torso pair is seen (the back turned), the head blob's area does (its size at scale 1 learnt
+  while the torso was seen), by at most 3 % a frame.
 * ``reach(j)``: the farthest a joint's patch can be from its parent's patch in the image: the bone's
   start length x ``scale`` x 1.15, plus 0.12 m (both patches sit on the suit, in front of their joints;
   metres -> pixels from the start torso, neck to hips = 0.315 m). No point the tracker outputs is
@@ -59,6 +61,7 @@ class BodyBounds:
         self.offset_facing = np.ones(N_JOINTS)
         self.offset_scale = np.ones(N_JOINTS)
         self.scale = 1.0
+        self.head_ref: float | None = None  # area (px²) of the head's blob at scale 1
         self.facing = 1.0
         # classes whose joints hang lower in the tree come later, so that parents are placed first (the
         # root's class first; then by the shallowest, then the deepest joint; single-patch colours first)
@@ -179,8 +182,11 @@ class BodyBounds:
                     points[j] = points[par] + v * (within * self.reach(j) / n)
         return points
 
-    def observe(self, points: np.ndarray, tracked: np.ndarray) -> None:
-        """Update scale, facing and offsets from a frame's points (16, 2) and tracked flags (16,)."""
+    def observe(self, points: np.ndarray, tracked: np.ndarray, head_area: float | None = None) -> None:
+        """Update scale, facing and offsets from a frame's points (16, 2), tracked flags (16,) and the
+        head blob's area (px², None when not seen). While the torso is seen it sets the scale (and the
+        head's area at scale 1 is learnt); while it is not, the head's size does (the dark head looks the
+        same size from every side), changing at most 3 % a frame."""
         ls, rs, neck, hips, chest = _J["left_shoulder"], _J["right_shoulder"], _J["neck"], _J["hips"], _J["chest"]
         obs = []
         if tracked[neck] and tracked[hips]:
@@ -194,6 +200,12 @@ class BodyBounds:
             self.facing = 1.0
         if obs:
             self.scale = float(np.clip(max(max(obs), 0.97 * self.scale), 0.2, 5.0))
+            if head_area and head_area > 0:
+                ref = head_area / self.scale**2
+                self.head_ref = ref if self.head_ref is None else 0.9 * self.head_ref + 0.1 * ref
+        elif head_area and head_area > 0 and self.head_ref:
+            s_head = float(np.sqrt(head_area / self.head_ref))
+            self.scale = float(np.clip(s_head, 0.97 * self.scale, 1.03 * self.scale))
         for j in range(1, N_JOINTS):
             par = PARENTS[j]
             if tracked[j] and tracked[par]:

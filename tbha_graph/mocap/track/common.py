@@ -119,12 +119,19 @@ def doubt_names(bits: int) -> list[str]:
     return [name for name, b in DOUBT.items() if int(bits) & b]
 
 
-def frame_candidates(centres: np.ndarray) -> Callable[[int], list[np.ndarray]]:
-    """``candidates(row)``: per class, the (k, 2) px centres of the filled slots of that frame."""
+def frame_candidates(centres: np.ndarray, areas: np.ndarray | None = None) -> Callable[[int], list[np.ndarray]]:
+    """``candidates(row)``: per class, the (k, 2) px centres of the filled slots of that frame; with
+    ``areas`` (n, C, K) px², (k, 3) arrays of x, y, area."""
 
     def get(t: int) -> list[np.ndarray]:
         row = centres[t]
-        return [row[c][np.isfinite(row[c, :, 0])] for c in range(row.shape[0])]
+        if areas is None:
+            return [row[c][np.isfinite(row[c, :, 0])] for c in range(row.shape[0])]
+        out = []
+        for c in range(row.shape[0]):
+            ok = np.isfinite(row[c, :, 0])
+            out.append(np.column_stack([row[c][ok], areas[t, c][ok]]))
+        return out
 
     return get
 

@@ -148,11 +148,14 @@ class KalmanTracker:
         # joints seen, to anchor lost ones: placed in this frame, else tracked in the previous one
         seen = {j: (kf_pred[j], p.gate_px) for j in range(N_JOINTS) if self.unseen[j] == 0}
         merged: set[int] = set()  # joints whose patch merged with a same-coloured one in this frame
+        head_area = None  # px² of the head's blob, when tracked
         for c in body.class_order:
             J = self.joints_of[c]
             if not J:
                 continue
             det = candidates[c]
+            det_area = det[:, 2] if det.ndim == 2 and det.shape[1] == 3 else None  # (k,) px², when given
+            det = det[:, :2]
             m, k = len(J), len(det)
             pred = np.empty((m, 2))
             gate = np.empty(m)
@@ -231,6 +234,8 @@ class KalmanTracker:
                 if ambiguous:
                     doubt |= DOUBT["ambiguous identity"]
             for r, j in enumerate(J):
+                if r in got and j == HEAD and det_area is not None:
+                    head_area = float(det_area[got[r]])
                 if r in got:
                     points[j] = det[got[r]]
                     tracked[j] = True
@@ -245,7 +250,7 @@ class KalmanTracker:
                         unc[j] = max(unc[j], min(p.max_gate_px, p.gate_sigma * spread[j]))
                 done[j] = True
         body.settle(points, tracked)
-        body.observe(points, tracked)
+        body.observe(points, tracked, head_area)
         for j, kf in enumerate(self.filters):
             if tracked[j]:
                 if lost[j]:
@@ -289,6 +294,6 @@ def posture_kalman(ctx, detections, colors) -> dict:
     joints_of = class_joints(model, detections["colour_names"])
     start, points0 = start_frame(centres, areas, joints_of, p, float(detections["fps"]))
     points, tracked, doubt = run_passes(
-        frame_candidates(centres), len(centres), start, points0, lambda p0: KalmanTracker(p0, joints_of, p)
+        frame_candidates(centres, areas), len(centres), start, points0, lambda p0: KalmanTracker(p0, joints_of, p)
     )
     return {"tracks": tracks_bundle(points, tracked, detections, doubt)}
