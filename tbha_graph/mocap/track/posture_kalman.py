@@ -187,8 +187,10 @@ class KalmanTracker:
                     dist = np.linalg.norm(det - expected, axis=1)
                     ok = np.linalg.norm(det - point, axis=1) <= reach
                     norm = reach + p.gate_px
-                elif j in TORSO or not mirrored:  # nothing seen to hang from (a torso seen again after a
-                    # turn; a patch whose colour no mirror twin wears): the nearest to where the body had it
+                elif j in TORSO or not mirrored or not lost[J[1 - r]]:
+                    # nothing seen to hang from (a torso seen again after a turn; a patch whose colour no mirror
+                    # twin wears, or whose twin is followed, so a second blob can only be this one): the
+                    # nearest to where the body had it
                     dist = np.linalg.norm(det - pred[r], axis=1)
                     ok = dist <= p.max_gate_px
                     norm = p.max_gate_px
