@@ -35,7 +35,8 @@ class StartParams(BaseModel):
 
 class FrameTracker(Protocol):
     """One tracking direction: ``step`` takes a frame's candidates per class (list over classes of
-    (k, 2) px arrays) and returns ``points`` (16, 2) px and ``tracked`` (16,) bool."""
+    (k, 2) px arrays, or (k, 3) with the blob areas in px² when the tracker asked for them) and returns
+    ``points`` (16, 2) px and ``tracked`` (16,) bool."""
 
     def step(self, candidates: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]: ...
 

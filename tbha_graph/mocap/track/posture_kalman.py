@@ -111,13 +111,15 @@ class KalmanTracker:
         self.body = BodyBounds(points0, joints_of)
         self.last = points0.copy()
         self.unseen = np.zeros(N_JOINTS, np.int64)  # frames since each joint was last tracked
-        self.doubt = 0  # reasons (bits of DOUBT_REASONS) the last frame's labelling is doubtful
+        self.doubt = 0  # why the last frame's labelling is doubtful (bits of common.DOUBT)
 
     def _reset(self, kf, xy) -> None:
         kf.statePost = np.array([[xy[0]], [xy[1]], [0.0], [0.0]], np.float32)
         kf.errorCovPost = np.diag([self.p.measurement_noise**2] * 2 + [self.p.gate_px**2 / 4.0] * 2).astype(np.float32)
 
     def step(self, candidates: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """One frame: ``candidates[c]`` (k, 2) px or (k, 3) px, px² (with the blob areas) of class ``c``;
+        returns ``points`` (16, 2) px and ``tracked`` (16,); sets ``doubt``."""
         p = self.p
         body = self.body
         kf_pred = np.empty((N_JOINTS, 2))
@@ -160,7 +162,7 @@ class KalmanTracker:
             pred = np.empty((m, 2))
             gate = np.empty(m)
             anchor = [parent_of(j) for j in J]
-            mirrored = m == 2 and frozenset(JOINT_NAMES[j].split("_", 1)[-1] for j in J).__len__() == 1
+            mirrored = m == 2 and len({JOINT_NAMES[j].split("_", 1)[-1] for j in J}) == 1  # a left/right twin pair
             # costs are distances over the joint's gate (<= 1 inside it); "not visible" costs 1 for every joint
             cost = np.full((m, k + m), _INF)
             cost[np.arange(m), k + np.arange(m)] = 1.0
