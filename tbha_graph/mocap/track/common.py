@@ -4,7 +4,9 @@ A tracker identifies the 16 joints in the segmenter's per-colour candidates. It 
 frame where the posture rules (:mod:`.posture`) identify every joint, tracks forwards from there to the
 end and backwards from there to the first frame, one frame at a time (:class:`FrameTracker`), and
 returns a TRACKS2D bundle: ``points`` (n, 16, 2) px, ``tracked`` (n, 16) bool (False: the patch was
-not seen; ``points`` then holds the tracker's estimate), ``fps``, ``width``, ``height``, ``frame_index``.
+not seen; ``points`` then holds the tracker's estimate), ``fps``, ``width``, ``height``, ``frame_index``,
+and from trackers that flag them ``doubtful`` (n,) uint8: why each frame's labelling is doubtful (bits of
+:data:`DOUBT`; 0 = not doubtful).
 """
 from __future__ import annotations
 
