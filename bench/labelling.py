@@ -7,9 +7,10 @@ suit; left/right sharing: the seed-style ``suit_seed.yaml``), captures each with
 renderer's truth of which patch is where (``patch2d``, ``patch_visible``):
 
 * ``identity_error_pct=``: of the visible patch-frames, % whose patch the tracker labelled with another
-  joint, or whose joint the tracker marks tracked somewhere else than on its patch (a tracked point
-  matches the visible patch whose true centre is nearest, within ``tol`` = 0.8 x the patch's projected
-  radius + 3 px; blob centres of partly hidden patches move).
+  joint, or whose joint the tracker marks tracked somewhere else than on its patch. A tracked point is on
+  its own patch when within ``tol`` = 0.8 x the patch's projected radius + 3 px of its true centre (blob
+  centres of partly hidden patches move; two touching patches make one blob between them); otherwise it
+  is on the visible patch whose true centre is nearest, if within that patch's ``tol``.
 * ``missed_pct=``: visible patch-frames the tracker did not mark tracked (for reference).
 * ``reacquire_frames_p95=``: after a patch was out of sight for at least 2 frames, frames from its
   reappearance until the tracker labels it correctly (a patch never re-labelled before it hides again or
@@ -126,12 +127,13 @@ def label_scores(tracks: dict, truth: dict, radius_m: float, detected: np.ndarra
     d = np.where(vis[:, None, :], d, np.inf)
     nearest = np.argmin(d, axis=2)
     dmin = np.take_along_axis(d, nearest[..., None], axis=2)[..., 0]
-    matched = trk & (dmin <= np.take_along_axis(tol, nearest, axis=1))
     own = np.arange(15)[None, :]
-    correct = matched & (nearest == own)
+    own_d = d[:, np.arange(15), np.arange(15)]  # to its own patch (inf when hidden)
+    correct = trk & (own_d <= tol)  # on its own patch (a merged blob may be as near another)
+    matched_other = trk & ~correct & (dmin <= np.take_along_axis(tol, nearest, axis=1)) & (nearest != own)
     # a visible patch is wrong when its joint is tracked elsewhere, or another joint is tracked on it
     taken_by_other = np.zeros((n, 15), bool)
-    t_idx, j_idx = np.nonzero(matched & (nearest != own))
+    t_idx, j_idx = np.nonzero(matched_other)
     taken_by_other[t_idx, nearest[t_idx, j_idx]] = True
     wrong = vis & ((trk & ~correct) | taken_by_other)
     missed = vis & ~trk & ~taken_by_other
