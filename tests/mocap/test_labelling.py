@@ -300,3 +300,20 @@ def test_body_scale_follows_the_head_while_the_torso_is_hidden():
     assert body.reach(J["left_knee"]) == pytest.approx(0.7 * reach0, rel=0.02)
     body.observe(p0, only_head, head_area=400.0)  # a jump back is limited to 3 % a frame
     assert body.scale == pytest.approx(0.7 * 1.03, abs=0.01)
+
+
+def test_left_right_twins_reacquired_by_a_guess_stay_flagged(seed_model):
+    """Seed suit: everything vanishes for 12 frames; when the body comes back the hip joints stay hidden,
+    so each knee could be either (both within reach of the hips): whatever the tracker picks, every frame
+    from then on is flagged 'ambiguous identity' while the knees are followed."""
+    p0 = tpose_points()
+    n0, gap, n1 = 10, 12, 12
+    truth = np.repeat(p0[None], n0 + gap + n1, 0)
+    visible = np.ones((len(truth), N_JOINTS), bool)
+    visible[n0 : n0 + gap] = False
+    visible[n0 + gap :, [J["left_hip"], J["right_hip"]]] = False
+    out = run_node(posture_kalman, detections=_detections(seed_model, truth, visible), colors=seed_model)["tracks"]
+    back = np.arange(n0 + gap, len(truth))
+    assert out["tracked"][back][:, [J["left_knee"], J["right_knee"]]].any(axis=1).all()
+    assert (out["doubtful"][back] & DOUBT["ambiguous identity"]).all()
+    assert not (out["doubtful"][:n0] & DOUBT["ambiguous identity"]).any()

@@ -24,9 +24,10 @@ pairs (the seed's suit) by their image order. Later frames (seed: "continuity of
 ``points`` hold the detected centres where tracked (the filter is used for association only; smoothing
 is a downstream filter's job). ``doubtful`` (n,) uint8 flags each frame whose labelling is doubtful
 (bits of :data:`.common.DOUBT`): fewer than ``min_patches`` patches tracked, at least
-``doubt_lost_joints`` joints lost, an ambiguous
-identity (a same-coloured pair either way about as good, or decided by the facing), or tracked patches
-far (median > ``residual_px``) from their predictions.
+``doubt_lost_joints`` joints lost, an ambiguous identity (a same-coloured pair either way about as good,
+decided by the facing, or left/right twins re-acquired together when either blob could have been
+either: flagged until they are lost again), or tracked patches far (median > ``residual_px``) from
+their predictions.
 """
 from __future__ import annotations
 
@@ -112,6 +113,7 @@ class KalmanTracker:
         self.last = points0.copy()
         self.unseen = np.zeros(N_JOINTS, np.int64)  # frames since each joint was last tracked
         self.doubt = 0  # why the last frame's labelling is doubtful (bits of common.DOUBT)
+        self.guessed: set[frozenset[int]] = set()  # left/right twins whose identities were re-acquired by a guess
 
     def _reset(self, kf, xy) -> None:
         kf.statePost = np.array([[xy[0]], [xy[1]], [0.0], [0.0]], np.float32)
@@ -237,6 +239,11 @@ class KalmanTracker:
                 got, ambiguous = body.resolve_pair(J, det, got, cost, lost, facing)
                 if ambiguous:
                     doubt |= DOUBT["ambiguous identity"]
+            if mirrored and lost[J[0]] and lost[J[1]] and got:
+                # twins both coming back: if a blob they took could have been the other's, which is which
+                # was a guess (nothing tells left from right here); flagged until they are lost again
+                if any(cost[1 - r, col] < _INF for r, col in got.items()):
+                    self.guessed.add(frozenset(J))
             for r, j in enumerate(J):
                 if r in got and j == HEAD and det_area is not None:
                     head_area = float(det_area[got[r]])
@@ -270,6 +277,9 @@ class KalmanTracker:
                     s[2:] = 0.0
                 kf.statePost = s
         self.unseen = np.where(tracked, 0, self.unseen + 1)
+        self.guessed = {pair for pair in self.guessed if not all(self.unseen[j] > p.lost_after_frames for j in pair)}
+        if self.guessed:
+            doubt |= DOUBT["ambiguous identity"]
         self.last = points.copy()
         patched = [j for j in range(N_JOINTS) if j != HEAD]
         if tracked[patched].sum() < p.min_patches:
