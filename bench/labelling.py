@@ -28,7 +28,9 @@ renderer's truth of which patch is where (``patch2d``, ``patch_visible``):
   with the render's true camera instead of the T-pose calibration (``calibrate.known``), to separate
   the labelling and 3D solver from the calibration; ``turn_deg=``: the truth's heading range.
 
-Run: ``python bench/labelling.py`` (all takes, both suits; about a minute per take on one core),
+Run: ``python bench/labelling.py`` (all takes, both suits; a few seconds per take),
+``python bench/labelling.py --held-out`` (three takes never used while tuning: other cameras, a full
+360° turn, noise and motion blur),
 ``python bench/labelling.py --takes spin_131_03 --suits left_right``, ``--keep DIR`` to write the run folders
 (overlay.mp4, errors.png, metrics.json) there.
 """
@@ -53,6 +55,14 @@ TAKES: dict[str, tuple[str, dict]] = {
     "spin_131_03": ("131_03.bvh", {"turn_degrees": 90.0, "turn_start": 2.0, "turn_seconds": 2.0}),
     "walk_turn_131_01": ("131_01.bvh", {"turn_degrees": 200.0, "turn_start": 1.0, "turn_seconds": 3.0}),
     "walk_turn_131_02": ("131_02.bvh", {"turn_degrees": -220.0, "turn_start": 1.0, "turn_seconds": 3.5}),
+}
+#: Takes never used while tuning the tracker (other cameras, noise, motion blur): ``--held-out``.
+HELD_OUT: dict[str, tuple[str, dict]] = {
+    "held_131_03_high_left_camera": ("131_03.bvh", {"camera.eye": [-1.5, 1.9, 3.8]}),
+    "held_131_01_full_turn_right_camera": ("131_01.bvh", {"camera.eye": [1.6, 1.3, 4.2], "turn_degrees": 360.0,
+                                                          "turn_start": 0.5, "turn_seconds": 4.0}),
+    "held_131_02_turn_noisy_blurred": ("131_02.bvh", {"turn_degrees": -150.0, "render.noise_sigma": 5.0,
+                                                      "render.motion_blur_samples": 3}),
 }
 SUITS = {
     "upper_lower": ROOT / "tbha_graph" / "mocap" / "suit_default.yaml",
@@ -199,8 +209,8 @@ def run_take(take: str, suit: str, keep: Path | None) -> dict:
     from tbha_graph.mocap.evaluate import measures as m
     from tbha_graph.mocap.suit import load_suit
 
-    clip, lead = TAKES[take]
-    sets = {f"lead_in.{k}": v for k, v in lead.items()}
+    clip, lead = {**TAKES, **HELD_OUT}[take]
+    sets = {(k if "." in k else f"lead_in.{k}"): v for k, v in lead.items()}
     sets["colors.suit"] = str(SUITS[suit])
     sets["render.suit"] = str(SUITS[suit])
     vars = {"bvh": str(ROOT / "data" / "mocap" / "cmu" / clip)}
@@ -234,11 +244,14 @@ def run_take(take: str, suit: str, keep: Path | None) -> dict:
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--takes", nargs="*", default=list(TAKES), choices=list(TAKES))
+    ap.add_argument("--takes", nargs="*", default=None, choices=list(TAKES) + list(HELD_OUT))
+    ap.add_argument("--held-out", action="store_true", help="run the held-out takes instead of the tuning ones")
     ap.add_argument("--suits", nargs="*", default=list(SUITS), choices=list(SUITS))
     ap.add_argument("--keep", type=Path, default=None, help="write each take's run folder under this folder")
     ap.add_argument("--verbose", action="store_true", help="also print the frames with identity errors")
     a = ap.parse_args(argv)
+    if a.takes is None:
+        a.takes = list(HELD_OUT) if a.held_out else list(TAKES)
     rows = []
     for suit in a.suits:
         for take in a.takes:
