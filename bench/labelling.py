@@ -182,8 +182,14 @@ def off_body(tracks: dict, truth: dict, placed_only: bool = False) -> tuple[int,
 
 def true_camera_seq_mpjpe(sets: dict, vars: dict, truth: dict) -> float:
     """seq-MPJPE (mm) of the same capture calibrated with the render's true camera (``calibrate.known``
-    in place of the T-pose calibration): what the labelling and 3D solver give without calibration error."""
+    in place of the T-pose calibration): what the labelling and 3D solver give without calibration error.
+    NaN when the pipeline has no ``calibrate`` node (a solver that estimates the camera itself)."""
     import tempfile
+
+    from tbha_graph.core.spec import read_pipeline
+
+    if "calibrate" not in read_pipeline(ROOT / "pipelines" / "evaluate_render.yaml").nodes:
+        return float("nan")
 
     from tbha_graph.core.runner import run_graph
     from tbha_graph.core.runner import load_graph
