@@ -51,6 +51,10 @@ TORSO = frozenset(JOINT_INDEX[n] for n in ("hips", "chest", "neck"))
 ROOT_CHILDREN = tuple(JOINT_INDEX[n] for n in ("chest", "left_hip", "right_hip"))
 
 _INF = 1e9
+#: two lost left/right twins leave a blob when the body expects one of them less than this much nearer (as a
+#: fraction of the nearer one's distance; at least a quarter gate): their expected places, from offsets seen
+#: before the loss, are too stale to choose between closer calls
+TWIN_MARGIN = 0.5
 
 
 class PostureKalmanParams(StartParams):
@@ -230,7 +234,8 @@ class KalmanTracker:
             if m == 2 and k >= 1 and lost[J[0]] and lost[J[1]]:
                 # both lost: a blob either could be, about as well, is left until they can be told apart
                 with np.errstate(invalid="ignore"):  # inf - inf: not comparable, not ambiguous
-                    close = np.abs(expected_dist[0] - expected_dist[1]) < 0.25 * p.gate_px
+                    close = np.abs(expected_dist[0] - expected_dist[1]) < np.maximum(
+                        0.25 * p.gate_px, TWIN_MARGIN * np.minimum(expected_dist[0], expected_dist[1]))
                 both = (cost[0, :k] < _INF) & (cost[1, :k] < _INF) & close
                 if both.any():
                     got = {r: col for r, col in got.items() if not both[col]}
