@@ -157,15 +157,17 @@ def choose_signs(s_abs: np.ndarray, hinge_cost: np.ndarray | None, weight: float
     return signs[idx]
 
 
-def solve_temporal(pixels: np.ndarray, cam: Camera, lengths: np.ndarray, fps: float, p: TemporalRaySphereParams) -> tuple[np.ndarray, dict, np.ndarray]:
+def solve_temporal(pixels: np.ndarray, cam: Camera, lengths: np.ndarray, fps: float, p: TemporalRaySphereParams,
+                   torso: np.ndarray | None = None) -> tuple[np.ndarray, dict, np.ndarray]:
     """Joints ``(n, 16, 3)`` camera frame (metres), a report, and the depth side chosen per (frame, joint)
-    ``(n, 16)`` int8 (-1 nearer the camera than the parent, +1 farther, 0 torso); see the module docstring."""
+    ``(n, 16)`` int8 (-1 nearer the camera than the parent, +1 farther, 0 torso); see the module docstring.
+    ``torso`` ``(n, 7, 3)`` camera frame (joints :data:`TORSO`) replaces step 1 when given."""
     d = ray_directions(cam, pixels)  # z = 1
     u = d / np.linalg.norm(d, axis=-1, keepdims=True)
     n = pixels.shape[0]
     idx = np.array(TORSO)
     P = np.zeros((n, N_JOINTS, 3))
-    P[:, idx] = torso_poses(cam, pixels[:, idx], tpose_on_floor(lengths)[idx], fps, p.torso_cutoff)
+    P[:, idx] = torso_poses(cam, pixels[:, idx], tpose_on_floor(lengths)[idx], fps, p.torso_cutoff) if torso is None else torso
     forward = np.cross(P[:, JOINT_INDEX["left_shoulder"]] - P[:, JOINT_INDEX["right_shoulder"]],
                        P[:, JOINT_INDEX["neck"]] - P[:, JOINT_INDEX["chest"]])
     forward /= np.linalg.norm(forward, axis=1, keepdims=True)  # actor's forward, camera frame (left x up)

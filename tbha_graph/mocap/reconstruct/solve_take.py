@@ -1,0 +1,396 @@
+"""``reconstruct.solve_take``: camera, floor and motion estimated together from the whole take.
+
+One camera films a person of known bone lengths; the 2D tracks of the suit's points are all there is.
+This node finds, for the whole take at once (model and residuals: :mod:`.take_model`):
+
+* the focal length (square pixels, principal point at the image centre) — observable because the body's
+  depth extent and its motion towards and away from the camera change its perspective, with bone lengths
+  fixed; a fronto-parallel T-pose alone gives only focal ÷ distance;
+* the floor (its normal and height in the camera frame), hence the camera's height and tilt;
+* per frame the root position and every bone's direction (bone lengths exact by construction);
+* where each tracked point sits on the body (its offset from the joint centre, around suit defaults).
+
+Method. ``scipy.optimize.least_squares`` (trf, sparse ``jac_sparsity``, soft-L1 loss) over residuals
+divided by their standard deviations: reprojection of every tracked point, joint-acceleration smoothness,
+near-rigid torso, knee/elbow hinge limits, floor contact (planted ankles at rest height and still, no ankle
+below the floor), a weak prior on the point offsets.
+
+1. **Focal sweep.** For each starting focal length (``focal_grid`` × image width) the seed's geometry gives a
+   first skeleton: the T-pose torso by PnP, then the torso pose per frame and the limb depths with depth
+   sides chosen over time (:func:`.temporal_ray_sphere.solve_temporal`). A short solve of a frame subsample
+   with the focal length free scores each start; the best is kept.
+2. **Whole take.** The globals (focal, floor, offsets) are solved on a frame subsample spread over the
+   whole take, then held fixed while the frames are solved in overlapping windows (``window`` frames),
+   so cost grows linearly with the take and memory stays flat.
+3. **Depth sides.** A limb can lie in front of or behind its parent with the same image. Each limb's side
+   is re-decided over time segments by trying the mirrored segment and keeping it when the total cost
+   (hinges, floor, smoothness, reprojection) falls.
+4. **World frame.** y up = the floor normal, origin on the floor below the hips on the first frame, z the
+   actor's forward on the first frame made horizontal (the actor faces +z in the T-pose).
+
+Outputs: ``motion`` (world, metres), ``camera`` (K, R, t in that world), ``sides`` (depth side per frame and
+joint, for ``viz.depth_sides``) and ``report`` (camera figures with uncertainties from the Jacobian, costs,
+warnings).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from ...core.errors import NodeError
+from ...core.node import node, optional
+from ...core.types import Array, Arrays, Json
+from ..calibrate.observations import read_tracks
+from ..calibrate.pnp import solve_pnp_planar
+from ..camera import Camera
+from ..ports import CAMERA, MOTION, TRACKS2D
+from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS
+from .body import DEFAULT_ANKLE_HEIGHT, body_lengths, tpose_on_floor
+from .take_model import (ANKLES, DEFAULT_POINT_OFFSETS, PER_FRAME, TORSO_PAIRS, TakeData, TakeProblem, Weights,
+                         bone_directions, fronts, pack_initial, point_positions, unit, levenberg_marquardt)
+from .take_model import search_sides_lm as search_sides
+from .temporal_ray_sphere import TemporalRaySphereParams, solve_temporal
+
+
+class SolveTakeParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    focal_px: float | None = Field(None, gt=0, description="known focal length (held fixed); None: estimated from the take", json_schema_extra={"unit": "px"})
+    focal_grid: list[float] = Field([0.7, 1.0, 1.4, 2.0], min_length=1, description="starting focal lengths tried, as multiples of the image width")
+    tpose_frames: int = Field(10, ge=1, description="opening T-pose frames used to place the first skeleton")
+    window: int = Field(150, ge=20, description="frames per solving window (cost grows linearly with the take)")
+    overlap: int = Field(30, ge=4, description="frames shared by consecutive windows (blended)")
+    calib_frames: int = Field(70, ge=20, description="frames (spread over the take) used to solve focal, floor and point offsets")
+    max_iterations: int = Field(20, ge=1, description="Levenberg-Marquardt iterations on the whole take")
+    calib_iterations: int = Field(12, ge=1, description="Levenberg-Marquardt iterations per start on the frame subsample")
+    sigma_px: float = Field(1.0, gt=0, description="2D tracking noise", json_schema_extra={"unit": "px"})
+    sigma_acc: float = Field(30.0, gt=0, description="typical joint acceleration (smoothness prior)", json_schema_extra={"unit": "m/s^2"})
+    ankle_height: float = Field(DEFAULT_ANKLE_HEIGHT, ge=0, le=0.3, description="ankle joint height above the floor when standing", json_schema_extra={"unit": "m"})
+    free_offsets: bool = Field(True, description="estimate where each tracked point sits on the body (else the suit defaults)")
+    side_search: bool = Field(True, description="re-decide limbs' depth sides over time segments by total cost")
+
+
+def tpose_camera(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarray, f: float, centre: np.ndarray,
+                 width: int, height: int, n_tpose: int, ankle_height: float) -> Camera:
+    """A camera of focal ``f`` px posed by PnP of the bone-length T-pose (all joints, world z = 0 plane) on the
+    mean of the first ``n_tpose`` frames' points ``(n, 16, 2)``."""
+    k = min(n_tpose, points.shape[0])
+    img = np.nanmean(np.where(tracked[:k, :, None], points[:k], np.nan), axis=0)
+    ok = np.isfinite(img).all(axis=1)
+    if ok.sum() < 6:
+        raise NodeError(f"only {int(ok.sum())} joints are tracked on the first {k} frames: no T-pose to start from",
+                        hint="the take must open with a T-pose facing the camera (or set focal_px and trim the take)")
+    world = tpose_on_floor(lengths, ankle_height)
+    K = np.array([[f, 0.0, centre[0]], [0.0, f, centre[1]], [0.0, 0.0, 1.0]])
+    R, t = solve_pnp_planar(world[ok], img[ok], K, np.zeros(5))
+    return Camera(K=K, R=R, t=t, width=width, height=height)
+
+
+def rest_points(lengths: np.ndarray, offsets: np.ndarray, ankle_height: float) -> tuple[np.ndarray, np.ndarray]:
+    """The rest T-pose on the floor ``(16, 3)`` (world frame, facing +z) and its tracked points ``(16, 3)``."""
+    rest = tpose_on_floor(lengths, ankle_height)
+    return rest, point_positions(rest[None], offsets)[0]
+
+
+def torso_track(cam: Camera, pixels: np.ndarray, lengths: np.ndarray, offsets: np.ndarray, fps: float,
+                ankle_height: float, cutoff: float = 3.0) -> np.ndarray:
+    """Camera-frame torso joints ``(n, 7, 3)`` (:data:`.temporal_ray_sphere.TORSO`): the rest torso's *points*
+    (where its patches sit, not its joints) fitted to the tracked torso ``pixels`` ``(n, 16, 2)`` by PnP on
+    each frame (from the previous pose, the first from ``cam``), the pose low-passed, the joints placed
+    with that pose."""
+    import cv2
+    from scipy.spatial.transform import Rotation
+
+    from .temporal_ray_sphere import TORSO, lowpass
+
+    idx = np.array(TORSO)
+    rest, pts = rest_points(lengths, offsets, ankle_height)
+    centre = rest[idx].mean(axis=0)
+    obj = np.ascontiguousarray(pts[idx] - centre)
+    K = np.ascontiguousarray(cam.K)
+    rvec = cv2.Rodrigues(np.ascontiguousarray(cam.R))[0]
+    tvec = np.ascontiguousarray((cam.R @ centre + cam.t).reshape(3, 1))
+    n = pixels.shape[0]
+    rv, tv = np.empty((n, 3)), np.empty((n, 3))
+    for k in range(n):
+        ok, r, t = cv2.solvePnP(obj, np.ascontiguousarray(pixels[k, idx]), K, None, rvec.copy(), tvec.copy(),
+                                useExtrinsicGuess=True, flags=cv2.SOLVEPNP_ITERATIVE)
+        if ok and np.isfinite(r).all() and np.isfinite(t).all() and t[2, 0] > 0:
+            rvec, tvec = r, t
+        rv[k], tv[k] = rvec[:, 0], tvec[:, 0]
+    q = Rotation.from_rotvec(rv).as_quat()
+    flip = np.cumprod(np.where(np.einsum("ij,ij->i", q[1:], q[:-1]) < 0, -1.0, 1.0))
+    q[1:] *= flip[:, None]
+    q = lowpass(q, fps, cutoff)
+    R = Rotation.from_quat(q / np.linalg.norm(q, axis=1, keepdims=True)).as_matrix()
+    t = lowpass(tv, fps, cutoff)
+    return np.einsum("nij,kj->nki", R, rest[idx] - centre) + t[:, None, :]
+
+
+def contacts_from_image(points: np.ndarray, tracked: np.ndarray, fps: float) -> np.ndarray:
+    """Planted ankles ``(n, 2)`` bool from the image alone (so neither the focal length nor the depth sides can
+    bias them): a planted foot does not move in the world, and the camera is still, so its ankle point stays
+    put in the image. Planted = tracked and moving under 0.5 % of the body's image height per frame at 30 fps (about 1 cm)
+    (both neighbouring steps), for at least 3 frames."""
+    from ..skeleton import JOINT_INDEX
+
+    ank = points[:, ANKLES]  # (n, 2, 2)
+    n = points.shape[0]
+    body = np.nanmedian(np.linalg.norm(points[:, JOINT_INDEX["head"]] - 0.5 * (ank[:, 0] + ank[:, 1]), axis=-1))
+    thr = 0.005 * max(float(body), 1.0) * 30.0 / fps
+    speed = np.full((n, 2), np.inf)
+    if n > 1:
+        step = np.linalg.norm(np.diff(ank, axis=0), axis=-1)
+        speed[1:] = step
+        speed[:-1] = np.minimum(speed[:-1], step) if n > 1 else speed[:-1]
+        speed[1:-1] = np.maximum(step[1:], step[:-1])
+    still = (speed < thr) & tracked[:, ANKLES]
+    out = np.zeros_like(still)
+    for a in range(2):  # runs of at least 3 frames
+        run = 0
+        for k in range(n + 1):
+            if k < n and still[k, a]:
+                run += 1
+                continue
+            if run >= 3:
+                out[k - run:k, a] = True
+            run = 0
+    return out
+
+
+def detect_contacts(P: np.ndarray, nf: np.ndarray, d: float, fps: float, ankle_height: float) -> np.ndarray:
+    """Planted ankles ``(n, 2)`` bool: within 4 cm of their rest height and moving under 0.35 m/s."""
+    h = P[:, ANKLES] @ nf + d - ankle_height
+    v = np.zeros_like(h)
+    if P.shape[0] > 1:
+        step = np.linalg.norm(np.diff(P[:, ANKLES], axis=0), axis=-1) * fps
+        v[1:] = step
+        v[0] = step[0]
+        v[1:-1] = np.minimum(step[1:], step[:-1])
+    low = h < np.minimum(0.04, np.percentile(h, 20, axis=0) + 0.03)
+    return low & (v < 0.35)
+
+
+COMPARED_TERMS = ("reprojection", "torso", "hinge", "below_floor", "acceleration", "contact", "slide")
+
+
+def globals_vector(f: float, d: float, free_offsets: bool) -> np.ndarray:
+    """Globals ``[log f, floor tangent (2), floor offset, point offsets (32, if free)]`` at a start."""
+    return np.concatenate([[np.log(f), 0.0, 0.0, d], np.zeros(2 * N_JOINTS if free_offsets else 0)])
+
+
+def rest_pair_distances(lengths: np.ndarray, ankle_height: float) -> np.ndarray:
+    rest = tpose_on_floor(lengths, ankle_height)
+    return np.linalg.norm(rest[TORSO_PAIRS[:, 0]] - rest[TORSO_PAIRS[:, 1]], axis=-1)
+
+
+def first_skeleton(points, tracked, lengths, f, centre, width, height, fps, p: SolveTakeParams):
+    """A first skeleton for focal ``f``: camera by PnP of the T-pose, torso by PnP of its points per frame, limbs
+    by ray-sphere with depth sides chosen over time. Returns ``(joints (n, 16, 3) camera frame, camera)``."""
+    cam = tpose_camera(points, tracked, lengths, f, centre, width, height, p.tpose_frames, p.ankle_height)
+    torso = torso_track(cam, points, lengths, DEFAULT_POINT_OFFSETS, fps, p.ankle_height)
+    P, _, _ = solve_temporal(points, cam, lengths, fps, TemporalRaySphereParams(), torso=torso)
+    return P, cam
+
+
+def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: SolveTakeParams, free_offsets: bool,
+                 focal_prior=None, contact=None) -> tuple[TakeProblem, float]:
+    """A :class:`TakeProblem` around joints ``P`` and a floor ``(normal (3,), offset)`` (or a camera whose world
+    y is up); contacts detected from ``P`` unless given. Returns the problem and the floor offset."""
+    if isinstance(cam_or_floor, Camera):
+        nf, d = cam_or_floor.R[:, 1], float(-cam_or_floor.R[:, 1] @ cam_or_floor.t)
+    else:
+        nf, d = cam_or_floor
+    if contact is None:
+        contact = detect_contacts(P, nf, d, fps, p.ankle_height)
+    contact = np.asarray(contact, dtype=bool)
+    data = TakeData(points, weight, lengths, centre, fps, p.ankle_height, contact,
+                    rest_pair_distances(lengths, p.ankle_height))
+    w = Weights(sigma_px=p.sigma_px, sigma_acc=p.sigma_acc)
+    return TakeProblem(data, bone_directions(P), nf, w, DEFAULT_POINT_OFFSETS.copy(), free_offsets=free_offsets,
+                       focal_prior=focal_prior), d
+
+
+def solve_frames(points, weight, lengths, centre, fps, P0, floor, g_start, p, iterations, free_offsets, focal_prior,
+                 side_search: bool, contact: np.ndarray | None = None):
+    """Whole-take solve from joints ``P0``: LM, then (optionally) the depth-side search and LM again.
+    Returns ``(problem, x, cost, normal equations, flips kept)``."""
+    prob, _ = make_problem(points, weight, lengths, centre, fps, P0, floor, p, free_offsets, focal_prior, contact)
+    x = np.concatenate([g_start, pack_initial(P0, prob.ref)])
+    x, cost, _, ne = levenberg_marquardt(prob, x, iterations)
+    kept = 0
+    if side_search:
+        g = prob.globals_of(x).copy()
+        P = prob.joints_from_frames(prob.frames_of(x))
+        P, kept = search_sides(prob, P, g)
+        nf, d = prob.floor(g)
+        prob, _ = make_problem(points, weight, lengths, centre, fps, P, (nf, d), p, free_offsets, focal_prior, contact)
+        g[1:3] = 0.0
+        x = np.concatenate([g, pack_initial(P, prob.ref)])
+        x, cost, _, ne = levenberg_marquardt(prob, x, iterations)
+    return prob, x, cost, ne, kept
+
+
+def interpolate_joints(Psub: np.ndarray, sub: np.ndarray, n: int) -> np.ndarray:
+    """Joints ``(n, 16, 3)`` on every frame from joints ``Psub`` on frames ``sub``: root positions and bone
+    directions interpolated linearly (directions renormalised), bones kept at their lengths."""
+    if len(sub) == n:
+        return Psub.copy()
+    frames = np.arange(n)
+    root = np.stack([np.interp(frames, sub, Psub[:, 0, c]) for c in range(3)], axis=1)
+    lengths = np.linalg.norm(Psub[0, 1:] - Psub[0, PARENTS[1:]], axis=-1)
+    dirs = bone_directions(Psub)
+    di = np.stack([np.stack([np.interp(frames, sub, dirs[:, b, c]) for c in range(3)], axis=1)
+                   for b in range(N_JOINTS - 1)], axis=1)
+    di = unit(di)
+    P = np.empty((n, N_JOINTS, 3))
+    P[:, 0] = root
+    for j in range(1, N_JOINTS):  # joint order has parents first
+        P[:, j] = P[:, PARENTS[j]] + lengths[j - 1] * di[:, j - 1]
+    return P
+
+
+def world_frame(P: np.ndarray, nf: np.ndarray, d: float) -> tuple[np.ndarray, np.ndarray]:
+    """World -> camera ``(R (3, 3), t (3,))``: y = the floor normal (up), z = the actor's forward on the first
+    frame made horizontal, origin on the floor below the first frame's hips."""
+    thorax, pelvis = fronts(P[:1])
+    fwd = thorax[0] + pelvis[0]
+    z = fwd - (fwd @ nf) * nf
+    if np.linalg.norm(z) < 1e-6:
+        z = np.array([0.0, 0.0, -1.0]) - nf[2] * nf
+    z = z / np.linalg.norm(z)
+    y = nf
+    x = np.cross(y, z)
+    B = np.stack([x, y, z], axis=1)  # columns: world axes in camera coordinates
+    origin = P[0, 0] - (P[0, 0] @ nf + d) * nf  # on the floor below the hips
+    return B, origin
+
+
+def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarray, width: int, height: int,
+                      fps: float, p: SolveTakeParams, progress=None) -> dict:
+    """The whole solve (see the module docstring) on 2D points ``(n, 16, 2)`` px. Returns a dict with
+    ``joints`` (n, 16, 3) world metres, ``camera`` (:class:`Camera`), ``sides`` (n, 16) int8, ``report``."""
+    t0 = time.perf_counter()
+    n = points.shape[0]
+    centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+    weight = tracked.astype(np.float64)
+    report: dict = {"frames": n}
+    warnings_out: list[str] = []
+    # 1. on a frame subsample spread over the take: for each starting focal length (or the known one), a
+    #    first skeleton, LM with the focal length free, the depth-side search, LM again; keep the cheapest
+    step = max(1, int(np.ceil(n / p.calib_frames)))
+    sub = np.arange(0, n, step)
+    if p.focal_px is not None:
+        starts, focal_prior = [float(p.focal_px)], (float(p.focal_px), 1e-4)
+        report["focal_source"] = "given"
+    else:
+        starts, focal_prior = [m * width for m in p.focal_grid], None
+        report["focal_source"] = "estimated from the take"
+    contact = contacts_from_image(points, tracked, fps)
+    report["planted_pct"] = [round(float(c) * 100, 1) for c in contact.mean(axis=0)]
+    best, sweep = None, []
+    for k, f0 in enumerate(starts):
+        try:
+            P0, cam = first_skeleton(points, tracked, lengths, f0, centre, width, height, fps, p)
+        except (NodeError, ValueError):
+            continue
+        g0 = globals_vector(f0, float(-cam.R[:, 1] @ cam.t), False)
+        probs, xs, _, _, kept = solve_frames(points[sub], weight[sub], lengths, centre, fps / step, P0[sub], cam, g0, p,
+                                             p.calib_iterations, False, focal_prior, p.side_search, contact[sub])
+        terms = probs.term_costs(xs)
+        score = sum(terms[t] for t in COMPARED_TERMS)
+        f_end = float(np.exp(probs.globals_of(xs)[0]))
+        sweep.append([round(f0, 1), round(f_end, 1), round(score, 1)])
+        if best is None or score < best[0]:
+            best = (score, probs, xs, kept)
+        if progress:
+            progress(k + 1, len(starts) + 1)
+    if best is None:
+        raise NodeError("no starting focal length gave a first skeleton",
+                        hint="check that the take opens with a T-pose facing the camera, or set focal_px")
+    report["focal_sweep"] = sweep
+    _, probs, xs, kept1 = best
+    g_sub = probs.globals_of(xs)
+    nf, d = probs.floor(g_sub)
+    # 2. every frame: start from the subsample's solution interpolated (bone directions), LM with the globals
+    Psub = probs.joints_from_frames(probs.frames_of(xs))
+    P0 = interpolate_joints(Psub, sub, n)
+    gs = np.concatenate([g_sub[:1], [0.0, 0.0, d]])
+    prob, x, cost, ne, kept2 = solve_frames(points, weight, lengths, centre, fps, P0, (nf, d), gs, p,
+                                            p.max_iterations, False, focal_prior, False, contact)
+    f, nf, d, offs, P = prob.solution(x)
+    if progress:
+        progress(len(starts) + 1, len(starts) + 1)
+    # uncertainty of the focal length (log f) from the normal equations, scaled by the fit's residual level
+    terms = prob.term_costs(x)
+    dof = max(prob.residuals(x).size - x.size, 1)
+    scale = max(2.0 * cost / dof, 1e-12)
+    try:
+        cov = ne.globals_covariance() * scale if ne is not None else np.full((4, 4), np.nan)
+        focal_sd_pct = float(np.sqrt(max(cov[0, 0], 0.0)) * 100.0)
+    except Exception:  # noqa: BLE001 - a singular system: the focal length is not determined
+        focal_sd_pct = float("inf")
+    B, origin = world_frame(P, nf, d)
+    K = np.array([[f, 0.0, centre[0]], [0.0, f, centre[1]], [0.0, 0.0, 1.0]])
+    camera = Camera(K=K, R=B, t=origin, width=width, height=height)
+    joints = camera.to_world(P)
+    cam_centre = camera.center
+    hips0 = joints[0, 0]
+    axis_world = B.T @ np.array([0.0, 0.0, 1.0])
+    sides = np.zeros((n, N_JOINTS), dtype=np.int8)
+    par = np.where(PARENTS < 0, 0, PARENTS)
+    sides[:, 1:] = np.where(P[:, 1:, 2] < P[:, par[1:], 2], -1, 1)
+    reproj = np.linalg.norm(
+        (f * point_positions(P, offs)[..., :2] / point_positions(P, offs)[..., 2:3] + centre) - points, axis=-1)
+    report.update(
+        focal_px=round(f, 2), focal_sd_pct=round(focal_sd_pct, 3),
+        camera_height_m=round(float(cam_centre[1]), 4),
+        camera_distance_m=round(float(np.hypot(cam_centre[0] - hips0[0], cam_centre[2] - hips0[2])), 4),
+        camera_tilt_deg=round(float(np.degrees(np.arcsin(np.clip(-axis_world[1], -1, 1)))), 3),
+        reprojection_px_median=round(float(np.median(reproj[tracked])), 4) if tracked.any() else None,
+        side_flips=int(kept1 + kept2), solve_seconds=round(time.perf_counter() - t0, 3),
+        cost={k: round(v, 2) for k, v in terms.items()},
+    )
+    if not np.isfinite(focal_sd_pct) or focal_sd_pct > 5.0:
+        warnings_out.append(f"the focal length is uncertain: {f:.0f} px ± {focal_sd_pct:.1f} % (1 sd); the take may "
+                            "lack depth motion (walk towards or away from the camera, turn) — give focal_px if known")
+    report["warnings"] = warnings_out
+    return {"joints": joints, "camera": camera, "sides": sides, "report": report, "camera_frame_joints": P}
+
+
+@node(
+    "reconstruct.solve_take",
+    version=1,
+    inputs={"tracks": TRACKS2D, "body": optional(Json(doc="bone lengths {joint: metres}"), "bone lengths; defaults if absent")},
+    outputs={
+        "motion": MOTION,
+        "camera": CAMERA,
+        "report": Json(doc="camera figures (focal, height, distance, tilt, uncertainty), costs, warnings"),
+        "sides": Arrays({"sides": Array("int", ("n_frames", N_JOINTS))},
+                        doc="depth side per (frame, joint): -1 front of its parent, +1 behind, 0 root"),
+    },
+    params=SolveTakeParams,
+)
+def solve_take(ctx, tracks, body):
+    """Camera (focal, pose above the floor) and motion estimated together from the whole take's 2D tracks."""
+    p: SolveTakeParams = ctx.params
+    tr = read_tracks(tracks)
+    if tr.fps is None or not np.isfinite(tr.fps) or tr.fps <= 0:
+        raise NodeError("the tracks have no frame rate", hint="the tracking node must give 'fps'")
+    if tr.n_frames < 3:
+        raise NodeError(f"the take has {tr.n_frames} frames; the solver needs at least 3")
+    lengths = body_lengths(body)
+    out = solve_take_arrays(tr.points, tr.tracked, lengths, tr.width, tr.height, float(tr.fps), p,
+                            progress=lambda k, total: ctx.log(f"stage {k}/{total}"))
+    rep = out["report"]
+    ctx.log(f"focal {rep['focal_px']:.0f} px (± {rep['focal_sd_pct']:.1f} %), camera {rep['camera_height_m']:.2f} m high, "
+            f"{rep['camera_distance_m']:.2f} m away, tilt {rep['camera_tilt_deg']:.1f}°; {rep['solve_seconds']:.1f} s")
+    for w in rep["warnings"]:
+        warn = getattr(ctx, "warn", None)  # the framework's warning channel where it has one
+        (warn if callable(warn) else ctx.log)(w)
+    motion = {"joints": out["joints"], "fps": np.asarray(tr.fps, dtype=np.float64), "tracked": tr.tracked.copy(),
+              "joint_names": np.array(JOINT_NAMES)}
+    return {"motion": motion, "camera": out["camera"].to_model(), "report": out["report"],
+            "sides": {"sides": out["sides"], "joint_names": np.array(JOINT_NAMES), "fps": np.asarray(tr.fps, dtype=np.float64)}}
