@@ -13,8 +13,10 @@ Figures that need no ground truth (available for a user's own video):
 With ground truth (``truth`` connected and not ``{}``):
 
 * ``mpjpe_mm``: mean joint position error in the world frame after aligning the WHOLE clip to the truth
-  with ONE transform fitted over all frames and joints (``alignment`` param: ``similarity`` = Umeyama
-  rotation + translation + uniform scale (default), ``rigid`` = rotation + translation, ``none``). The
+  with ONE transform fitted over all frames and joints (``alignment`` param: ``rigid`` = rotation +
+  translation (default: a wrong scale, i.e. a wrong camera, stays in the figure), ``similarity`` = Umeyama
+  rotation + translation + uniform scale, ``none``). ``root_mpjpe_mm``: the same for the root (hips) alone,
+  the global trajectory's error. The
   calibrated world frame is the calibration's own choice, so some alignment is needed; one transform for
   the clip keeps drift, lean and per-frame errors in the figure. The fitted transform is reported as
   ``alignment_scale``, ``alignment_rotation_deg``, ``alignment_translation_m``.
@@ -30,6 +32,10 @@ With ground truth (``truth`` connected and not ``{}``):
 
 ``doubtful_ranges``: ``[[first, last, reason], ...]`` frames whose labelling or result is doubtful
 (:mod:`tbha_graph.mocap.evaluate.doubtful`); the ``errors`` bundle gets the per-frame bits as ``doubtful``.
+
+Floor and camera (no ground truth needed): ``floor_penetration_mm`` (worst ankle below its resting height
+above the floor y = 0), ``foot_skate_mm`` (mean horizontal movement per frame of a planted ankle),
+``focal_px``; with a truth camera ``focal_err_pct`` and ``camera_height_err_m``.
 
 A figure that cannot be computed (e.g. jitter of a clip shorter than 4 frames) is ``null``.
 
@@ -49,6 +55,7 @@ from ...core.node import node, optional
 from ...core.types import Array, Arrays, Json
 from ..io.ground_truth import TRUTH, check_ground_truth, truth_joints2d, truth_visibility
 from ..ports import CAMERA, METRICS, MOTION, TRACKS2D
+from ..reconstruct.body import DEFAULT_ANKLE_HEIGHT
 from ..skeleton import JOINT_NAMES, N_JOINTS, PATCHED_JOINTS
 from . import measures as m
 from .doubtful import doubtful_bits, doubtful_ranges
@@ -64,7 +71,7 @@ class MetricsParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     alignment: Literal["similarity", "rigid", "none"] = Field(
-        "similarity",
+        "rigid",
         description="how the motion's world frame is aligned to the truth's for mpjpe_mm: one transform for the "
                     "whole clip, 'similarity' (rotation, translation, scale), 'rigid' (no scale) or 'none'",
     )
@@ -95,7 +102,9 @@ def _same_length(n: int, other: int, what: str) -> None:
 
 
 def quality_figures(joints: np.ndarray, fps: float, tracks: dict, camera) -> tuple[dict, np.ndarray]:
-    """Figures needing no ground truth (see module docstring) and the per-frame reprojection error (n,) px."""
+    """Figures needing no ground truth (see module docstring) and the per-frame reprojection error (n,) px.
+    The reprojection compares joint centres with tracked patch centres, so it includes the patches' offsets
+    from the joints (a few px); the solver's own fit of the patches is its report's ``reprojection_px_median``."""
     tracked = np.asarray(tracks["tracked"], dtype=bool)
     reproj = m.reprojection_errors(joints, camera, tracks["points"], tracked)
     figures = {
@@ -125,12 +134,41 @@ def truth_figures(joints: np.ndarray, fps: float, truth: dict, alignment: str) -
         "mpjpe_root_mm": _figure(m.nan_mean(err_root)),
         "pa_mpjpe_mm": _figure(m.nan_mean(err_pa)),
         "accel_error_m_s2": _figure(m.accel_error(aligned, gt, fps)),
+        "root_mpjpe_mm": _figure(m.nan_mean(err[:, 0])),
         "lag_ms": _figure(1000.0 * m.lag_frames(aligned, gt) / fps),
         "truth_jitter_m_s3": _figure(m.jitter(gt, fps)),
         "per_joint_mpjpe_mm": {name: _figure(v) for name, v in zip(JOINT_NAMES, per_joint)},
     }
     per_frame = {"mpjpe_mm": m.frame_mean(err), "mpjpe_root_mm": m.frame_mean(err_root), "pa_mpjpe_mm": m.frame_mean(err_pa)}
     return figures, per_frame
+
+
+def floor_figures(joints: np.ndarray, fps: float, ankle_height: float = DEFAULT_ANKLE_HEIGHT) -> dict:
+    """Contact with the floor (world y = 0), no ground truth needed. ``floor_penetration_mm``: how far the
+    worst foot goes below the floor (the ankle joint below ``ankle_height``), 0 if never; ``foot_skate_mm``:
+    mean horizontal movement per frame of an ankle while planted: within 3 cm of its resting height and
+    moving under 1 cm per frame (at 30 fps; WHAM's contact rule) on both ends of the step."""
+    ank = joints[:, [JOINT_NAMES.index("left_ankle"), JOINT_NAMES.index("right_ankle")]]
+    height = ank[..., 1] - ankle_height
+    out = {"floor_penetration_mm": _figure(max(0.0, -float(np.nanmin(height))) * 1000.0)}
+    if joints.shape[0] > 1:
+        step = np.linalg.norm(np.diff(ank[..., [0, 2]], axis=0), axis=-1)  # (n-1, 2) horizontal metres
+        planted = (height[1:] < 0.03) & (height[:-1] < 0.03) & (step < 0.01 * 30.0 / fps)
+        out["foot_skate_mm"] = _figure(float(step[planted].mean()) * 1000.0 if planted.any() else 0.0)
+    return out
+
+
+def camera_figures(camera, truth: dict | None) -> dict:
+    """``focal_px`` of the capture's camera and, when the truth has its camera, ``focal_err_pct`` and the
+    error of the camera's height above the floor ``camera_height_err_m``."""
+    out = {"focal_px": _figure(float(camera.K[0, 0]), 2)}
+    if truth and "K" in truth:
+        f_true = float(np.asarray(truth["K"])[0, 0])
+        out["focal_err_pct"] = _figure(100.0 * (float(camera.K[0, 0]) / f_true - 1.0), 3)
+        if "R" in truth and "t" in truth:
+            true_centre = -np.asarray(truth["R"]).T @ np.asarray(truth["t"])
+            out["camera_height_err_m"] = _figure(float(camera.center[1] - true_centre[1]))
+    return out
 
 
 def patch_figures(joints: np.ndarray, points: np.ndarray, truth: dict, alignment: str) -> dict:
@@ -154,7 +192,7 @@ def patch_figures(joints: np.ndarray, points: np.ndarray, truth: dict, alignment
 
 
 def compute_metrics(
-    motion: dict, tracks: dict, camera, truth: dict | None = None, raw_motion: dict | None = None, alignment: str = "similarity"
+    motion: dict, tracks: dict, camera, truth: dict | None = None, raw_motion: dict | None = None, alignment: str = "rigid"
 ) -> tuple[dict, dict[str, np.ndarray]]:
     """The ``metrics`` dict and the ``errors`` bundle (see module docstring). ``camera`` is a
     :class:`~tbha_graph.mocap.camera.Camera`; ``truth`` ``None`` or ``{}`` means no ground truth."""
@@ -168,6 +206,8 @@ def compute_metrics(
     metrics: dict = {"frames": int(n), "video_fps": _figure(float(np.asarray(tracks.get("fps", fps))))}
     quality, reproj = quality_figures(joints, fps, tracks, camera)
     metrics.update(quality)
+    metrics.update(floor_figures(joints, fps))
+    metrics.update(camera_figures(camera, truth if truth else None))
     if "inferred" in motion:  # samples filled by filter.fill_gaps; the rest of the untracked ones are missing
         inferred = np.asarray(motion["inferred"], dtype=bool)
         tracked3d = np.asarray(motion.get("tracked", tracks["tracked"]), dtype=bool)
@@ -211,7 +251,7 @@ def compute_metrics(
 
 @node(
     "evaluate.metrics",
-    version=2,
+    version=3,
     inputs={
         "motion": MOTION,
         "tracks": TRACKS2D,
@@ -234,4 +274,7 @@ def metrics(ctx, motion, tracks, camera, truth, raw_motion, extra):
     result, errors = compute_metrics(motion, tracks, camera.camera(), truth, raw_motion, ctx.params.alignment)
     if isinstance(extra, dict):
         result.update({k: v for k, v in extra.items() if isinstance(v, (int, float, str, bool)) and k not in result})
+        notes = [w for w in extra.get("warnings", []) if isinstance(w, str)]
+        if notes:  # warnings of the node that made the report reach the metrics (and the summary)
+            result["warnings"] = list(result.get("warnings", [])) + [w for w in notes if w not in result.get("warnings", [])]
     return {"metrics": result, "errors": errors}

@@ -58,13 +58,15 @@ class SolveTakeParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     focal_px: float | None = Field(None, gt=0, description="known focal length (held fixed); None: estimated from the take", json_schema_extra={"unit": "px"})
-    focal_grid: list[float] = Field([0.7, 1.0, 1.4, 2.0], min_length=1, description="starting focal lengths tried, as multiples of the image width")
+    focal_grid: list[float] = Field([0.8, 1.2, 1.7], min_length=1, description="starting focal lengths tried, as multiples of the image width")
+    focal_prior_width: float = Field(1.2, gt=0, description="centre of the weak focal-length prior, as a multiple of the image width")
+    focal_prior_log_sd: float = Field(0.35, gt=0, description="standard deviation of log(focal) in that prior (0.35: x/÷ 1.4)")
     tpose_frames: int = Field(10, ge=1, description="opening T-pose frames used to place the first skeleton")
     window: int = Field(150, ge=20, description="frames per solving window (cost grows linearly with the take)")
     overlap: int = Field(30, ge=4, description="frames shared by consecutive windows (blended)")
     calib_frames: int = Field(70, ge=20, description="frames (spread over the take) used to solve focal, floor and point offsets")
-    max_iterations: int = Field(20, ge=1, description="Levenberg-Marquardt iterations on the whole take")
-    calib_iterations: int = Field(12, ge=1, description="Levenberg-Marquardt iterations per start on the frame subsample")
+    max_iterations: int = Field(15, ge=1, description="Levenberg-Marquardt iterations on the whole take")
+    calib_iterations: int = Field(10, ge=1, description="Levenberg-Marquardt iterations per start on the frame subsample")
     sigma_px: float = Field(1.0, gt=0, description="2D tracking noise", json_schema_extra={"unit": "px"})
     sigma_acc: float = Field(30.0, gt=0, description="typical joint acceleration (smoothness prior)", json_schema_extra={"unit": "m/s^2"})
     ankle_height: float = Field(DEFAULT_ANKLE_HEIGHT, ge=0, le=0.3, description="ankle joint height above the floor when standing", json_schema_extra={"unit": "m"})
@@ -173,7 +175,7 @@ def detect_contacts(P: np.ndarray, nf: np.ndarray, d: float, fps: float, ankle_h
     return low & (v < 0.35)
 
 
-COMPARED_TERMS = ("reprojection", "torso", "hinge", "below_floor", "acceleration", "contact", "slide")
+COMPARED_TERMS = ("reprojection", "torso", "hinge", "below_floor", "acceleration", "contact", "slide", "priors")
 
 
 def globals_vector(f: float, d: float, free_offsets: bool) -> np.ndarray:
@@ -286,7 +288,8 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
         starts, focal_prior = [float(p.focal_px)], (float(p.focal_px), 1e-4)
         report["focal_source"] = "given"
     else:
-        starts, focal_prior = [m * width for m in p.focal_grid], None
+        # weak prior: lenses of ordinary cameras have f ~ 0.8-1.9 x the image width (log-normal around 1.2 W)
+        starts, focal_prior = [m * width for m in p.focal_grid], (p.focal_prior_width * width, p.focal_prior_log_sd)
         report["focal_source"] = "estimated from the take"
     contact = contacts_from_image(points, tracked, fps)
     report["planted_pct"] = [round(float(c) * 100, 1) for c in contact.mean(axis=0)]
@@ -297,21 +300,32 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
         except (NodeError, ValueError):
             continue
         g0 = globals_vector(f0, float(-cam.R[:, 1] @ cam.t), False)
-        probs, xs, _, _, kept = solve_frames(points[sub], weight[sub], lengths, centre, fps / step, P0[sub], cam, g0, p,
-                                             p.calib_iterations, False, focal_prior, p.side_search, contact[sub])
+        probs, xs, _, _, _ = solve_frames(points[sub], weight[sub], lengths, centre, fps / step, P0[sub], cam, g0, p,
+                                          p.calib_iterations, False, focal_prior, False, contact[sub])
         terms = probs.term_costs(xs)
         score = sum(terms[t] for t in COMPARED_TERMS)
         f_end = float(np.exp(probs.globals_of(xs)[0]))
         sweep.append([round(f0, 1), round(f_end, 1), round(score, 1)])
         if best is None or score < best[0]:
-            best = (score, probs, xs, kept)
+            best = (score, probs, xs)
         if progress:
-            progress(k + 1, len(starts) + 1)
+            progress(k + 1, len(starts) + 2)
     if best is None:
         raise NodeError("no starting focal length gave a first skeleton",
                         hint="check that the take opens with a T-pose facing the camera, or set focal_px")
     report["focal_sweep"] = sweep
-    _, probs, xs, kept1 = best
+    _, probs, xs = best
+    kept1 = 0
+    if p.side_search:  # the depth sides of the best start, searched on the subsample, then LM again
+        g = probs.globals_of(xs).copy()
+        Ps, kept1 = search_sides(probs, probs.joints_from_frames(probs.frames_of(xs)), g)
+        nf0, d0 = probs.floor(g)
+        probs, _ = make_problem(points[sub], weight[sub], lengths, centre, fps / step, Ps, (nf0, d0), p, False,
+                                focal_prior, contact[sub])
+        g[1:3] = 0.0
+        xs, _, _, _ = levenberg_marquardt(probs, np.concatenate([g, pack_initial(Ps, probs.ref)]), p.calib_iterations)
+        if progress:
+            progress(len(starts) + 1, len(starts) + 2)
     g_sub = probs.globals_of(xs)
     nf, d = probs.floor(g_sub)
     # 2. every frame: start from the subsample's solution interpolated (bone directions), LM with the globals
@@ -322,7 +336,7 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
                                             p.max_iterations, False, focal_prior, False, contact)
     f, nf, d, offs, P = prob.solution(x)
     if progress:
-        progress(len(starts) + 1, len(starts) + 1)
+        progress(len(starts) + 2, len(starts) + 2)
     # uncertainty of the focal length (log f) from the normal equations, scaled by the fit's residual level
     terms = prob.term_costs(x)
     dof = max(prob.residuals(x).size - x.size, 1)
@@ -353,6 +367,12 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
         side_flips=int(kept1 + kept2), solve_seconds=round(time.perf_counter() - t0, 3),
         cost={k: round(v, 2) for k, v in terms.items()},
     )
+    # a second start ending at a clearly different focal length at a similar cost: the take cannot tell them apart
+    rivals = [fe for f0, fe, c in sweep if abs(np.log(fe / f)) > np.log(1.1) and c < 1.25 * min(c2 for _, _, c2 in sweep)]
+    if rivals:
+        report["focal_rivals_px"] = [round(r, 1) for r in rivals]
+        warnings_out.append(f"the focal length is ambiguous: {f:.0f} px fits, but so does {rivals[0]:.0f} px nearly as well; "
+                            "3D positions scale with it — give the camera's focal length (focal_px) if you know it")
     if not np.isfinite(focal_sd_pct) or focal_sd_pct > 5.0:
         warnings_out.append(f"the focal length is uncertain: {f:.0f} px ± {focal_sd_pct:.1f} % (1 sd); the take may "
                             "lack depth motion (walk towards or away from the camera, turn) — give focal_px if known")

@@ -141,11 +141,12 @@ class Weights:
     """Standard deviations of the model's residuals."""
 
     sigma_px: float = 1.0        # reprojection, pixels
-    sigma_acc: float = 12.0      # joint acceleration, m/s^2
+    sigma_acc: float = 30.0      # joint acceleration, m/s^2
     sigma_torso: float = 0.05    # torso distances, metres (the real torso bends)
     sigma_hinge: float = 0.05    # wrong-way bending (unit vectors' dot product)
     sigma_floor: float = 0.01    # ankle below the floor / planted ankle off it, metres
     sigma_slide: float = 0.005   # planted ankle moving per frame, metres
+    contact_band: float = 0.0    # a planted ankle may rise this far above its standing height without cost, metres
     sigma_offset: float = 0.03   # point offsets around their defaults, metres
     robust_scale: float = 2.0    # reprojection residuals beyond this many sigmas count as soft-L1 (outliers)
 
@@ -267,7 +268,7 @@ class TakeProblem:
             hin.append(np.minimum(sign * np.sum(inside * fwd, axis=-1), 0.0) / w.sigma_hinge)
         h = P[:, ANKLES] @ nf + dfl - d.ankle_height  # (n, 2) metres above where they rest
         below = np.minimum(h, 0.0) / w.sigma_floor
-        on = np.where(d.contact, h, 0.0) / w.sigma_floor
+        on = np.where(d.contact, np.maximum(h - w.contact_band, 0.0), 0.0) / w.sigma_floor
         return np.concatenate([rep, torso, np.stack(hin, axis=1), below, on], axis=1)
 
     def slide_vectors(self, P: np.ndarray, nf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -722,7 +723,7 @@ def window_cost(prob: TakeProblem, P: np.ndarray, g: np.ndarray, lo: int, hi: in
     return 0.5 * float(r @ r)
 
 
-def search_sides_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, iterations: int = 3, margin: int = 4,
+def search_sides_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, iterations: int = 3, margin: int = 3,
                     groups: tuple[tuple[int, ...], ...] = SIDE_GROUPS) -> tuple[np.ndarray, int]:
     """Discrete search over depth sides with local re-optimisation: for each group of bones
     (:data:`SIDE_GROUPS`) and each out-of-plane run of frames (:func:`flip_segments`), the run is mirrored
@@ -736,7 +737,7 @@ def search_sides_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, iterations:
     for group in groups:
         for seg in flip_segments(P, group[0]):
             lo, hi = max(seg[0] - margin, 0), min(seg[-1] + 1 + margin, n)
-            if hi - lo < 3:
+            if len(seg) < 2:
                 continue
             trial = mirror(P, seg, group, prob.d.lengths)
             args = (prob.d, prob.w, prob.offsets0, g, nf)
