@@ -1,0 +1,67 @@
+"""Speed and memory of ``reconstruct.solve_take`` on the bundled sample's tracks and on a take 10x longer
+(the sample's tracks played forwards and backwards, so the motion stays continuous).
+
+Prints ``name=value`` lines: ``solver_ms_per_frame_sample``, ``solver_ms_per_frame_10x``, ``peak_mb_sample``,
+``peak_mb_10x`` (peak traced Python allocations during the solve) and the frame counts.
+
+    python bench/solver_speed.py            # tracks from the default pipeline's cache (runs it once)
+"""
+from __future__ import annotations
+
+import sys
+import time
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from tbha_graph.core.cache import Cache  # noqa: E402
+from tbha_graph.core.runner import load_graph, run_graph  # noqa: E402
+from tbha_graph.mocap.reconstruct.body import body_lengths  # noqa: E402
+from tbha_graph.mocap.reconstruct.solve_take import SolveTakeParams, solve_take_arrays  # noqa: E402
+
+
+def sample_tracks() -> dict:
+    import tempfile
+
+    out = Path(tempfile.mkdtemp(prefix="tbha-bench-solver-"))
+    spec = out / "tracks.yaml"
+    spec.write_text(f"extends: {ROOT / 'pipelines' / 'default.yaml'}\noutputs:\n  tracks.npz: track.tracks\n")
+    g = load_graph(spec)
+    run_graph(g, out_dir=out / "run", outputs=["tracks.npz"], cache=Cache(Path.home() / ".cache" / "tbha-graph"))
+    with np.load(out / "run" / "tracks.npz", allow_pickle=False) as z:
+        return {k: z[k] for k in z.files}
+
+
+def timed(points, tracked, width, height, fps) -> tuple[float, float]:
+    tracemalloc.start()
+    t0 = time.perf_counter()
+    solve_take_arrays(points, tracked, body_lengths(None), width, height, fps, SolveTakeParams())
+    dt = time.perf_counter() - t0
+    peak = tracemalloc.get_traced_memory()[1] / 1e6
+    tracemalloc.stop()
+    return dt, peak
+
+
+def main() -> None:
+    tr = sample_tracks()
+    pts, trk = tr["points"], tr["tracked"]
+    w, h, fps = int(tr["width"]), int(tr["height"]), float(tr["fps"])
+    dt, peak = timed(pts, trk, w, h, fps)
+    print(f"frames_sample={len(pts)}")
+    print(f"solver_ms_per_frame_sample={1000 * dt / len(pts):.1f}")
+    print(f"peak_mb_sample={peak:.1f}")
+    reps = [pts if k % 2 == 0 else pts[::-1] for k in range(10)]
+    reps_t = [trk if k % 2 == 0 else trk[::-1] for k in range(10)]
+    long_pts, long_trk = np.concatenate(reps), np.concatenate(reps_t)
+    dt, peak = timed(long_pts, long_trk, w, h, fps)
+    print(f"frames_10x={len(long_pts)}")
+    print(f"solver_ms_per_frame_10x={1000 * dt / len(long_pts):.1f}")
+    print(f"peak_mb_10x={peak:.1f}")
+
+
+if __name__ == "__main__":
+    main()
