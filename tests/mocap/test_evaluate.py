@@ -125,11 +125,12 @@ def test_known_offsets_give_known_figures(scene):
 def test_similarity_alignment_removes_a_global_rotation_and_scale(scene):
     rot = Rotation.from_euler("y", 90, degrees=True).as_matrix()
     other_frame = 0.8 * scene["joints"] @ rot.T + np.array([2.0, 0.0, -1.0])  # a calibration's own world frame
-    res, _ = evaluate(scene, other_frame, tracks=_tracks_of(scene, scene["joints"]))
+    res, _ = evaluate(scene, other_frame, tracks=_tracks_of(scene, scene["joints"]), alignment="similarity")
     assert res["mpjpe_mm"] == pytest.approx(0.0, abs=1e-4)
     assert res["pa_mpjpe_mm"] == pytest.approx(0.0, abs=1e-4)
     assert res["alignment_scale"] == pytest.approx(1 / 0.8) and res["alignment_rotation_deg"] == pytest.approx(90.0)
-    rigid, _ = evaluate(scene, other_frame, alignment="rigid")
+    rigid, _ = evaluate(scene, other_frame)  # the default headline: one rigid fit, so a wrong scale stays in it
+    assert rigid["mpjpe_alignment"] == "rigid" and rigid["alignment_scale"] == 1.0
     assert rigid["mpjpe_mm"] > 50.0  # 20 % too small: a rigid fit keeps that error
     assert rigid["mpjpe_root_mm"] > 100.0  # no alignment at all
 
