@@ -25,8 +25,9 @@ renderer's truth of which patch is where (``patch2d``, ``patch_visible``):
   points by the bone lengths seen at the start, scaled by the torso's size when last seen.
 * ``seq_mpjpe_mm=``: the final 3D motion vs the truth after ONE rigid alignment over the whole take
   (rotation + translation, no scale), turn included; ``seq_mpjpe_true_camera_mm=``: the same capture
-  with the render's true camera instead of the T-pose calibration (``calibrate.known``), to separate
-  the labelling and 3D solver from the calibration; ``turn_deg=``: the truth's heading range.
+  given the render's camera (the true camera in place of a ``calibrate`` node, or the true focal length
+  as the solver's ``focal_px``), to separate the labelling and 3D solver from the calibration;
+  ``turn_deg=``: the truth's heading range.
 
 Run: ``python bench/labelling.py`` (all takes, both suits; a few seconds per take),
 ``python bench/labelling.py --held-out`` (three takes never used while tuning: other cameras, a full
@@ -181,15 +182,27 @@ def off_body(tracks: dict, truth: dict, placed_only: bool = False) -> tuple[int,
 
 
 def true_camera_seq_mpjpe(sets: dict, vars: dict, truth: dict) -> float:
-    """seq-MPJPE (mm) of the same capture calibrated with the render's true camera (``calibrate.known``
-    in place of the T-pose calibration): what the labelling and 3D solver give without calibration error.
-    NaN when the pipeline has no ``calibrate`` node (a solver that estimates the camera itself)."""
+    """seq-MPJPE (mm) of the same capture given the render's camera: with a ``calibrate`` node (the seed's
+    chain) the true camera replaces the T-pose calibration (``calibrate.known``); with a solver that
+    estimates the camera itself (``reconstruct.solve_take``), its ``focal_px`` var is set to the true focal
+    length. What the labelling and the 3D solver give without calibration error."""
     import tempfile
 
     from tbha_graph.core.spec import read_pipeline
 
-    if "calibrate" not in read_pipeline(ROOT / "pipelines" / "evaluate_render.yaml").nodes:
-        return float("nan")
+    decl = read_pipeline(ROOT / "pipelines" / "evaluate_render.yaml")
+    if "calibrate" not in decl.nodes:
+        from tbha_graph.core.runner import load_graph, run_graph
+        from tbha_graph.mocap.evaluate import measures as m
+
+        if "focal_px" not in (decl.vars or {}):
+            return float("nan")
+        run = run_graph(load_graph(ROOT / "pipelines" / "evaluate_render.yaml", sets=sets,
+                                   vars={**vars, "focal_px": float(np.asarray(truth["K"])[0, 0])}),
+                        outputs=["metrics.json"], cache=False)
+        gt = truth["joints3d_world"]
+        aligned, _ = m.align_clip(np.asarray(run.output("smooth.motion")["joints"], dtype=np.float64), gt, "rigid")
+        return float(np.nanmean(m.joint_distances(aligned, gt))) * 1000.0
 
     from tbha_graph.core.runner import run_graph
     from tbha_graph.core.runner import load_graph
