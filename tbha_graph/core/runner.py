@@ -11,7 +11,7 @@ from .cache import Cache
 from .graph import Graph, build_graph
 from .progress import QUIET, Reporter
 from .registry import Registry
-from .rundir import write_run_dir
+from .rundir import check_out_dir, write_run_dir
 from .scheduler import RunResult, run_local, targets_of
 from .spec import PipelineDecl, apply_sets, apply_vars, read_pipeline
 from .errors import PipelineErrors
@@ -53,6 +53,8 @@ def run_graph(
     ``executor``: "local" or "dask" (``scheduler`` = address of an existing cluster, else a LocalCluster).
     """
     c: Cache | None = Cache() if cache is True else (cache or None)
+    if out_dir is not None:
+        check_out_dir(Path(out_dir))  # refuse a folder that is not ours before spending time on the run
     ids = targets_of(graph, outputs)
     t0 = time.perf_counter()
     work_root = Path(tempfile.mkdtemp(prefix="tbha-run-"))
