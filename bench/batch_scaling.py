@@ -75,7 +75,7 @@ def timed(label: str, pipeline: Path, takes: list[Take], var: str, out: Path, **
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--work", choices=["bvh", "video"], default="bvh")
     ap.add_argument("--takes", type=int, default=8)
     ap.add_argument("--frames", type=int, default=60, help="video frames per take (--work video)")

@@ -48,7 +48,7 @@ def chain(n: int):
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(allow_abbrev=False)
     ap.add_argument("--nodes", type=int, default=1000)
     ap.add_argument("--repeat", type=int, default=7)
     a = ap.parse_args()

@@ -262,7 +262,7 @@ def run_take(take: str, suit: str, keep: Path | None) -> dict:
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n")[0])
     ap.add_argument("--takes", nargs="*", default=None, choices=list(TAKES) + list(HELD_OUT))
     ap.add_argument("--held-out", action="store_true", help="run the held-out takes instead of the tuning ones")
     ap.add_argument("--suits", nargs="*", default=list(SUITS), choices=list(SUITS))

@@ -50,7 +50,7 @@ def timed(fn, repeats: int):
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(allow_abbrev=False)
     ap.add_argument("--clip", type=Path, default=ROOT / "data" / "mocap" / "cmu" / "131_02.bvh")
     ap.add_argument("--repeats", type=int, default=5)
     a = ap.parse_args()

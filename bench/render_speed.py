@@ -63,7 +63,7 @@ def bundled_motion(n: int) -> tuple[np.ndarray, float] | None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=150)
     ap.add_argument("--motion-blur", type=int, default=1)
     args = ap.parse_args()

@@ -53,7 +53,7 @@ def synthetic_clip(path: Path, n: int) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("video", nargs="?", default=str(ROOT / "data" / "sample" / "sample.mp4"))
     ap.add_argument("--frames", type=int, default=None, help="use at most this many frames")
     ap.add_argument("--repeat", type=int, default=3)

@@ -1,6 +1,7 @@
 """Shared pieces of the command-line tools: error printing without tracebacks, exit codes."""
 from __future__ import annotations
 
+import os
 import sys
 from typing import Any, Callable
 
@@ -10,9 +11,10 @@ EXIT_OK, EXIT_FAILED, EXIT_USER = 0, 1, 2
 
 
 def guarded(fn: Callable[[], int]) -> int:
-    """Run a CLI body; user errors print as messages (exit 2), node failures exit 1, ^C exits 130."""
+    """Run a CLI body; user errors print as messages (exit 2), node failures exit 1, ^C exits 130. A reader
+    that stops early (``tbha-graph schema | head``) ends the output quietly, as for any Unix tool."""
     try:
-        return fn()
+        return _quiet_on_broken_pipe(fn)
     except PipelineErrors as e:
         print(f"error: {e.format()}", file=sys.stderr)
         return EXIT_USER
@@ -22,9 +24,28 @@ def guarded(fn: Callable[[], int]) -> int:
     except TbhaError as e:
         print(f"error: {e.format()}", file=sys.stderr)
         return EXIT_USER
+    except RecursionError:
+        print("error: the input is nested too deeply to process (a pipeline, suit or body file, or a --set value)", file=sys.stderr)
+        return EXIT_USER
     except KeyboardInterrupt:
         print("interrupted; what finished is in the cache, run the same command to resume", file=sys.stderr)
         return 130
+
+
+def _quiet_on_broken_pipe(fn: Callable[[], int]) -> int:
+    try:
+        code = fn()
+        sys.stdout.flush()
+        return code
+    except BrokenPipeError:
+        # the reader closed the pipe: stop writing; point stdout at /dev/null so the interpreter's final
+        # flush does not raise again
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+        except (OSError, ValueError):
+            pass
+        return EXIT_OK
 
 
 def parse_assignments(items: list[str] | None, what: str) -> dict[str, Any]:

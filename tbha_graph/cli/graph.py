@@ -158,22 +158,22 @@ def cmd_run(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="tbha-graph", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(allow_abbrev=False, prog="tbha-graph", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="command", required=True)
 
-    s = sub.add_parser("nodes", help="list node types or describe one")
+    s = sub.add_parser("nodes", allow_abbrev=False, help="list node types or describe one")
     s.add_argument("type", nargs="?")
     s.add_argument("--plugin", action="append")
     s.set_defaults(fn=cmd_nodes)
 
-    s = sub.add_parser("validate", help="check pipeline files without running them")
+    s = sub.add_parser("validate", allow_abbrev=False, help="check pipeline files without running them")
     s.add_argument("files", nargs="+")
     s.add_argument("--set", action="append")
     s.add_argument("--var", action="append")
     s.add_argument("--plugin", action="append")
     s.set_defaults(fn=cmd_validate)
 
-    s = sub.add_parser("show", help="print the DAG (text, Mermaid, DOT) and optionally draw a PNG")
+    s = sub.add_parser("show", allow_abbrev=False, help="print the DAG (text, Mermaid, DOT) and optionally draw a PNG")
     s.add_argument("file")
     s.add_argument("--format", choices=["text", "mermaid", "dot"], default="text")
     s.add_argument("--png", help="also draw the DAG into this PNG")
@@ -182,16 +182,16 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--plugin", action="append")
     s.set_defaults(fn=cmd_show)
 
-    s = sub.add_parser("schema", help="JSON Schema of pipeline files (for editors)")
+    s = sub.add_parser("schema", allow_abbrev=False, help="JSON Schema of pipeline files (for editors)")
     s.add_argument("--out", help="write to this file instead of stdout")
     s.add_argument("--plugin", action="append")
     s.set_defaults(fn=cmd_schema)
 
-    s = sub.add_parser("run", help="run a pipeline (same as tbha-run)")
+    s = sub.add_parser("run", allow_abbrev=False, help="run a pipeline (same as tbha-run)")
     add_run_arguments(s)
     s.set_defaults(fn=cmd_run)
 
-    s = sub.add_parser("study", help="run an ablation study")
+    s = sub.add_parser("study", allow_abbrev=False, help="run an ablation study")
     s.add_argument("study")
     s.add_argument("--out", "-o")
     s.add_argument("--cache-dir")
@@ -200,7 +200,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--quiet", "-q", action="store_true")
     s.set_defaults(fn=cmd_study)
 
-    s = sub.add_parser("batch", help="run one pipeline over many takes (a glob, a folder or a YAML list)")
+    s = sub.add_parser("batch", allow_abbrev=False, help="run one pipeline over many takes (a glob, a folder or a YAML list)")
     s.add_argument("pipeline")
     s.add_argument("inputs", help="glob ('takes/*.mp4'), folder, or YAML file with 'takes:'")
     s.add_argument("--var-name", default="video", help="pipeline variable bound to each take's path (default: video)")
@@ -214,7 +214,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--quiet", "-q", action="store_true")
     s.set_defaults(fn=cmd_batch)
 
-    s = sub.add_parser("cache", help="inspect or clean the cache")
+    s = sub.add_parser("cache", allow_abbrev=False, help="inspect or clean the cache")
     s.add_argument("action", choices=["info", "clear", "gc"])
     s.add_argument("--cache-dir")
     s.add_argument("--older-than-days", type=float, help="gc: remove entries unused for this long")

@@ -42,7 +42,7 @@ def print_summary(run, out_dir: Path) -> None:
     ran = sum(r.status == "ran" for r in run.results.values())
     cached = sum(r.status == "cached" for r in run.results.values())
     print(f"\ndone in {run.seconds:.2f} s: {ran} node(s) ran, {cached} from cache")
-    if "metrics.json" in run.graph.outputs:
+    if "metrics.json" in run.graph.outputs and run.graph.outputs["metrics.json"][0] in run.results:
         metrics = run.output("metrics.json")
         if isinstance(metrics, dict):
             frames = metrics.get("frames")
@@ -58,7 +58,7 @@ def print_summary(run, out_dir: Path) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="tbha-run", description="Run a tbha-graph pipeline and write its outputs to a run directory.")
+    p = argparse.ArgumentParser(allow_abbrev=False, prog="tbha-run", description="Run a tbha-graph pipeline and write its outputs to a run directory.")
     add_run_arguments(p)
     return p
 

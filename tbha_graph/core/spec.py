@@ -197,6 +197,12 @@ def parse_assignment(text: str, what: str) -> tuple[str, Any]:
         value = yaml.safe_load(raw) if raw.strip() else ""
     except yaml.YAMLError:
         value = raw
+    except RecursionError:
+        value = None
+    from .yamlfile import MAX_DEPTH, nesting_depth
+
+    if value is None and raw.strip() and raw.strip() not in ("null", "~", "Null", "NULL") or nesting_depth(value) > MAX_DEPTH:
+        raise PipelineError(f"{what} '{name.strip()}': the value is nested too deeply (more than {MAX_DEPTH} levels)")
     return name.strip(), value
 
 
@@ -208,9 +214,17 @@ def apply_vars(decl: PipelineDecl, overrides: dict[str, Any] | None = None, base
     folder), since they were written there."""
     cwd = base_dir or Path.cwd()
     values: dict[str, Value] = dict(decl.vars)
-    for k, v in (overrides or {}).items():
-        values[k] = Value(v, Location(source), cwd)
     errors: list[PipelineError] = []
+    known = set(decl.vars) | _referenced_vars(decl)
+    for k, v in (overrides or {}).items():
+        if k not in known:  # a misspelt --var must not silently leave the default (e.g. the sample video) in place
+            errors.append(PipelineError(
+                f"unknown variable '{k}'{did_you_mean(k, known)}: the pipeline neither declares nor uses it",
+                location=Location(source),
+                hint=f"the pipeline's variables: {', '.join(sorted(known)) or '(none)'}",
+            ))
+            continue
+        values[k] = Value(v, Location(source), cwd)
 
     def subst(v: Value) -> Value:
         if isinstance(v.value, str):
@@ -233,6 +247,28 @@ def apply_vars(decl: PipelineDecl, overrides: dict[str, Any] | None = None, base
         n.params = {k: subst(v) for k, v in n.params.items()}
         n.inputs = {k: subst(v) for k, v in n.inputs.items()}
     return errors
+
+
+def _referenced_vars(decl: PipelineDecl) -> set[str]:
+    """Names of every ``${name}`` the nodes' params and inputs use."""
+    found: set[str] = set()
+
+    def walk(obj: Any) -> None:
+        if isinstance(obj, Value):
+            walk(obj.value)
+        elif isinstance(obj, str):
+            found.update(m.group(1) for m in _VAR.finditer(obj))
+        elif isinstance(obj, list):
+            for x in obj:
+                walk(x)
+        elif isinstance(obj, dict):
+            for x in obj.values():
+                walk(x)
+
+    for n in decl.nodes.values():
+        walk(n.params)
+        walk(n.inputs)
+    return found
 
 
 def _subst_deep(obj: Any, values: dict[str, Value], loc: Location, errors: list[PipelineError]) -> Any:

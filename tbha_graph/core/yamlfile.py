@@ -88,4 +88,33 @@ def load_yaml(path: str | Path, text: str | None = None) -> tuple[Any, list[Pipe
         return None, [PipelineError(f"YAML error: character {e.character!r} is not allowed in a YAML file", location=Location(str(path), line))]
     except yaml.YAMLError as e:
         return None, [PipelineError(f"YAML error: {e}", location=Location(str(path)))]
+    except RecursionError:
+        return None, [_too_deep(path)]
+    if nesting_depth(data) > MAX_DEPTH:
+        return None, [_too_deep(path)]
     return data, errors
+
+
+MAX_DEPTH = 64  # nesting levels of lists/mappings; deeper files are refused (no real file comes close)
+
+
+def _too_deep(path: Path) -> PipelineError:
+    return PipelineError(f"the YAML is nested too deeply (more than {MAX_DEPTH} levels of lists or mappings)",
+                         location=Location(str(path)), hint="flatten the file; no pipeline, suit or body file needs this depth")
+
+
+def nesting_depth(obj: Any, limit: int = MAX_DEPTH + 1) -> int:
+    """Depth of nested lists/dicts, counted without recursion and stopping at ``limit``."""
+    depth, level = 0, [obj]
+    while level and depth < limit:
+        nxt = []
+        for x in level:
+            if isinstance(x, dict):
+                nxt.extend(x.values())
+            elif isinstance(x, list):
+                nxt.extend(x)
+        if not nxt and not any(isinstance(x, (dict, list)) for x in level):
+            break
+        depth += 1
+        level = nxt
+    return depth

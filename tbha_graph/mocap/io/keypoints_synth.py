@@ -255,7 +255,7 @@ def synthesize_keypoints(bvh_path: str | Path, out_dir: str | Path, options: Syn
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m tbha_graph.mocap.io.keypoints_synth",
+    ap = argparse.ArgumentParser(allow_abbrev=False, prog="python -m tbha_graph.mocap.io.keypoints_synth",
                                  description="Write MediaPipe/OpenPose keypoint files and ground truth from a CMU BVH clip.")
     ap.add_argument("bvh", help="BVH clip (CMU skeleton)")
     ap.add_argument("out_dir", help="folder to write into")

@@ -203,7 +203,7 @@ def convert(src: str | Path, dst: str | Path) -> dict[str, tuple[int, ...]]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m tbha_graph.mocap.smpl.convert",
+    ap = argparse.ArgumentParser(allow_abbrev=False, prog="python -m tbha_graph.mocap.smpl.convert",
                                  description="Convert the official SMPL model .pkl to the .npz the pipeline loads.")
     ap.add_argument("src", help="official SMPL model file (.pkl)")
     ap.add_argument("dst", help="output .npz")

@@ -45,7 +45,7 @@ def make_sample(out_dir: Path, bvh: Path = DEFAULT_BVH, seed: int = 0) -> tuple[
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description="Render the bundled tight-suit sample video and its ground truth.")
+    ap = argparse.ArgumentParser(allow_abbrev=False, description="Render the bundled tight-suit sample video and its ground truth.")
     ap.add_argument("out_dir", type=Path, help="folder to write sample.mp4 and ground_truth.npz into")
     ap.add_argument("--bvh", type=Path, default=DEFAULT_BVH, help="BVH clip (CMU skeleton)")
     ap.add_argument("--seed", type=int, default=0)
