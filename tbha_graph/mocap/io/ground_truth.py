@@ -7,6 +7,10 @@ when present: ``joints3d_cam`` (n, 16, 3) m, ``joints2d`` (n, 16, 2) px, ``patch
 (n, 15, 3) m, ``patch2d`` (n, 15, 2) px, ``patch_visible`` (n, 15) bool, ``K``/``R`` (3, 3), ``t`` (3,),
 ``width``/``height`` () px, ``joint_names`` (16,) (must equal the skeleton's joint order).
 
+With ``video`` given, the truth must record that video's sha256, size and frame count (``video_sha256``,
+``video_bytes``, ``video_frames``, written by the renderer): a truth is never applied to another video
+(:mod:`tbha_graph.mocap.io.video_identity`).
+
 ``start``/``stop`` cut the per-frame arrays to the frame range decoded by ``io.video`` (give both nodes
 the same values), so frame ``i`` of the truth stays frame ``i`` of the motion.
 """
@@ -22,6 +26,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from ...core.errors import NodeError
 from ...core.node import InputPath, node
 from ...core.types import Arrays
+from .video_identity import check_truth_video
 from ..skeleton import JOINT_NAMES, N_JOINTS, N_PATCHES, PATCHED_JOINTS
 
 #: the ground-truth bundle; ``{}`` means "no ground truth"
@@ -45,6 +50,10 @@ class GroundTruthParams(BaseModel):
 
     path: InputPath | None = Field(
         None, description="ground_truth.npz of a rendered video; null = no ground truth (a real video)"
+    )
+    video: InputPath | None = Field(
+        None, description="the video being captured: the truth must record its sha256, size and frame count "
+                          "(a mismatch is an error); null = not checked"
     )
     start: int = Field(0, ge=0, description="first frame to keep (inclusive): the same as io.video's start",
                        json_schema_extra={"unit": "frame"})
@@ -138,9 +147,12 @@ def load_ground_truth(path: str | Path, start: int = 0, stop: int | None = None)
     return slice_frames(truth, start, stop, name=f"ground truth {path}")
 
 
-@node("io.ground_truth", version=1, outputs={"truth": TRUTH}, params=GroundTruthParams)
+@node("io.ground_truth", version=2, outputs={"truth": TRUTH}, params=GroundTruthParams)
 def ground_truth(ctx) -> dict:
     """Read a rendered video's ground truth (ground_truth.npz), or output {} when path is null.
+
+    With ``video`` set, the truth must belong to that video (the sha256, size and frame count it
+    records); a truth of another video is an error, never a misleading accuracy figure.
 
     Output ``truth``: the npz's arrays (per-frame ones cut to [start, stop)), see
     tbha_graph.mocap.synth.groundtruth for keys and units; {} means "no ground truth".
@@ -148,6 +160,11 @@ def ground_truth(ctx) -> dict:
     p: GroundTruthParams = ctx.params
     if p.path is None:
         return {"truth": {}}
+    if p.video is not None:
+        path = Path(p.path).expanduser()
+        truth = check_ground_truth(_read_npz(path), name=f"ground truth {path}")
+        check_truth_video(truth, p.video, name=f"ground truth {path}")
+        return {"truth": slice_frames(truth, p.start, p.stop, name=f"ground truth {path}")}
     return {"truth": load_ground_truth(p.path, p.start, p.stop)}
 
 

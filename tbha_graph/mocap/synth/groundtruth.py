@@ -18,6 +18,8 @@ Keys (one ``.npz``, ``allow_pickle=False``; ``n`` = number of video frames, fram
 * ``fps`` () float frames/s; ``width``, ``height`` () int pixels.
 * ``joint_names`` (16,) str; ``suit`` () str: the suit spec as JSON (:class:`tbha_graph.mocap.suit.SuitSpec`).
 * ``bone_lengths`` (16,) float64 metres: median over frames of |joint - parent| (root 0).
+* ``video_sha256`` () str, ``video_bytes`` () int, ``video_frames`` () int: the rendered video this truth
+  belongs to (added by the renderer; ``io.ground_truth`` refuses the truth for any other video).
 """
 from __future__ import annotations
 

@@ -25,6 +25,7 @@ from ..camera import Camera
 from ..suit import SuitSpec
 from .background import contact_shadows, hex_rgb, make_background
 from .body import BodyShape, build_body, patch_centres
+from ..io.video_identity import video_identity
 from .groundtruth import ground_truth, patch_visibility
 from .raster import NEAR, Raster
 from .sensor import Sensor
@@ -179,4 +180,6 @@ def render_video(
         writer.release()
         if tmp.exists():
             tmp.unlink()
-    return ground_truth(world, patch_world, visible, cam, p.fps, suit)
+    gt = ground_truth(world, patch_world, visible, cam, p.fps, suit)
+    gt.update(video_identity(path, frames=n))  # the truth applies to this video only (io.ground_truth checks it)
+    return gt
