@@ -132,7 +132,8 @@ def cmd_batch(args) -> int:
     print(f"batch: {len(takes)} take(s) of {args.pipeline}, executor {executor}", file=sys.stderr)
     rows = run_batch(args.pipeline, takes, out, var_name=args.var_name, cache=cache, executor=executor,
                      scheduler=args.scheduler, workers=args.workers, reporter=Reporter(quiet=args.quiet),
-                     plugins=tuple(args.plugin or ()))
+                     plugins=tuple(args.plugin or ()), vars=parse_assignments(args.var, "--var"),
+                     sets=parse_assignments(args.set, "--set"))
     print(to_markdown(rows, ("take", "status", "frames", "wall_s")))
     print(f"summary: {out / 'summary.csv'}, {out / 'summary.md'}")
     return EXIT_OK if all(r["status"] == "ok" for r in rows) else EXIT_FAILED
@@ -204,6 +205,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("pipeline")
     s.add_argument("inputs", help="glob ('takes/*.mp4'), folder, or YAML file with 'takes:'")
     s.add_argument("--var-name", default="video", help="pipeline variable bound to each take's path (default: video)")
+    s.add_argument("--set", "-s", action="append", metavar="NODE.PARAM=VALUE", help="override a param for every take (repeatable)")
+    s.add_argument("--var", "-v", action="append", metavar="NAME=VALUE", help="set a pipeline variable for every take (repeatable)")
     s.add_argument("--out", "-o")
     s.add_argument("--executor", choices=["local", "dask"], default="local")
     s.add_argument("--scheduler", metavar="tcp://HOST:PORT")

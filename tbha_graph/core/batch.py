@@ -77,20 +77,28 @@ def collect_takes(spec: str) -> list[Take]:
     return [Take(_name_for(f, used), str(f.resolve())) for f in files]
 
 
-def run_take(pipeline: str, take: Take, var_name: str, out_dir: str, cache_root: str | None, metrics_name: str, plugins: tuple[str, ...] = ()) -> dict[str, Any]:
-    """Run one take locally; returns its summary row (never raises for the take's own failures)."""
+def _with_plugins(plugins: tuple[str, ...]) -> None:
     from .registry import default_registry, load_plugin_modules
-    from .runner import load_graph, run_graph
 
     reg = default_registry()
     missing = [m for m in plugins if not any(s.module.startswith(m) for s in reg.specs())]
     if missing:
         load_plugin_modules(missing, reg)
 
+
+def run_take(pipeline: str, take: Take, var_name: str, out_dir: str, cache_root: str | None, metrics_name: str, plugins: tuple[str, ...] = (),
+             vars: dict[str, Any] | None = None, sets: dict[str, Any] | None = None, base_dir: str | None = None) -> dict[str, Any]:
+    """Run one take locally; returns its summary row (never raises for the take's own failures).
+    ``vars``/``sets`` (the command line's ``--var``/``--set``, relative paths from ``base_dir``) apply to
+    every take; a take's own ``set:`` entries win over ``sets``."""
+    from .runner import load_graph, run_graph
+
+    _with_plugins(plugins)
     row: dict[str, Any] = {"take": take.name, "input": take.path}
     t0 = time.perf_counter()
     try:
-        graph = load_graph(pipeline, vars={var_name: take.path}, sets=take.sets)
+        graph = load_graph(pipeline, vars={**(vars or {}), var_name: take.path}, sets={**(sets or {}), **take.sets},
+                           base_dir=Path(base_dir) if base_dir else None)
         run = run_graph(graph, out_dir=Path(out_dir) / take.name, cache=Cache(cache_root) if cache_root else False, reporter=QUIET)
         row["status"] = "ok"
         row["ran"] = sum(r.status == "ran" for r in run.results.values())
@@ -119,8 +127,27 @@ def run_batch(
     reporter: Reporter | None = None,
     metrics_name: str = "metrics.json",
     plugins: tuple[str, ...] = (),
+    vars: dict[str, Any] | None = None,
+    sets: dict[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
-    """Run ``pipeline`` once per take; write ``summary.csv``/``summary.md`` under ``out_dir``."""
+    """Run ``pipeline`` once per take; write ``summary.csv``/``summary.md`` under ``out_dir``.
+    ``vars``/``sets`` apply to every take, like tbha-run's ``--var``/``--set`` (relative paths from the
+    current folder); ``var_name`` is bound to each take and cannot also be given in ``vars``."""
+    if vars and var_name in vars:
+        raise TbhaError(f"--var {var_name}=... conflicts with the takes: each take is bound to '{var_name}'",
+                        hint="drop that --var, or bind the takes to another variable with --var-name")
+    base_dir = str(Path.cwd())
+    common = (dict(vars or {}), dict(sets or {}), base_dir)
+    if takes:  # a misspelt --var/--set is one error up front, not one failed row per take
+        from .runner import load_graph
+
+        _with_plugins(tuple(plugins))
+        try:
+            load_graph(str(pipeline), vars={**common[0], var_name: takes[0].path}, sets=common[1], base_dir=Path(base_dir))
+        except PipelineErrors as e:
+            mine = [x for x in e.errors if x.location is not None and x.location.file == "<command line>"]
+            if mine:
+                raise PipelineErrors(mine) from None
     reporter = reporter or Reporter()
     out_dir = Path(out_dir)
     cache_root = str(cache.root) if cache is not None else None
@@ -132,7 +159,7 @@ def run_batch(
         try:
             from distributed import as_completed
 
-            futs = [client.submit(run_take, str(pipeline), t, var_name, str(out_dir), cache_root, metrics_name, tuple(plugins), pure=False) for t in takes]
+            futs = [client.submit(run_take, str(pipeline), t, var_name, str(out_dir), cache_root, metrics_name, tuple(plugins), *common, pure=False) for t in takes]
             by_future = {f.key: t.name for f, t in zip(futs, takes)}
             done: dict[str, dict] = {}
             for f in as_completed(futs):
@@ -146,7 +173,7 @@ def run_batch(
                 cluster.close()
     else:
         for t in takes:
-            row = run_take(str(pipeline), t, var_name, str(out_dir), cache_root, metrics_name, tuple(plugins))
+            row = run_take(str(pipeline), t, var_name, str(out_dir), cache_root, metrics_name, tuple(plugins), *common)
             reporter._print(f"  {row['status']:<7} {row['take']:<28} {row['wall_s']:8.2f} s" + (f"  {row.get('error', '')[:120]}" if row["status"] != "ok" else ""))
             rows.append(row)
     write_tables(rows, out_dir, stem="summary", first=("take", "status", "frames", "wall_s"))

@@ -58,3 +58,40 @@ def test_batch_on_dask_local_cluster_equals_local(tmp_path, takes_dir, write):
     dask = run_batch(p, takes, tmp_path / "d", cache=Cache(tmp_path / "c2"), executor="dask", workers=2, plugins=("testnodes",))
     strip = lambda rows: [{k: v for k, v in r.items() if k != "wall_s"} for r in rows]
     assert strip(local) == strip(dask)
+
+
+BATCH_VARS = """
+vars: {video: none, scale: 1.0}
+nodes:
+  r: {type: test.read_numbers, params: {path: "${video}"}}
+  s: {type: test.scale, inputs: {x: r.x}, params: {factor: "${scale}"}}
+  m: {type: test.metrics, inputs: {x: s.y}}
+outputs: {metrics.json: m.metrics}
+"""
+
+
+def test_batch_takes_var_and_set_like_tbha_run(tmp_path, takes_dir, write, monkeypatch, capsys):
+    """issue 14 item 10: --var/--set apply to every take; a take's own set: wins; misspellings are errors."""
+    from tbha_graph.cli.graph import main
+
+    p = write("pv.yaml", BATCH_VARS)
+    monkeypatch.setenv("TBHA_CACHE_DIR", str(tmp_path / "c"))
+    argv = ["batch", str(p), str(takes_dir / "[ab].txt"), "--plugin", "testnodes", "--out", str(tmp_path / "o")]
+    assert main(argv + ["--var", "scale=10"]) == 0
+    rows = {r["take"]: r for r in run_batch(p, collect_takes(str(takes_dir / "a.txt")), tmp_path / "o2", cache=Cache(tmp_path / "c"),
+                                            plugins=("testnodes",), vars={"scale": 10.0})}
+    assert rows["a"]["mean"] == 20.0
+    assert "| a | ok |" in (tmp_path / "o" / "summary.md").read_text()
+    import csv
+
+    with open(tmp_path / "o" / "summary.csv") as f:
+        means = {r["take"]: float(r["mean"]) for r in csv.DictReader(f)}
+    assert means == {"a": 20.0, "b": 45.0}
+    assert main(argv[:-1] + [str(tmp_path / "o3"), "--set", "s.factor=3"]) == 0
+    with open(tmp_path / "o3" / "summary.csv") as f:
+        assert {r["take"]: float(r["mean"]) for r in csv.DictReader(f)} == {"a": 6.0, "b": 13.5}
+    capsys.readouterr()
+    assert main(argv[:-1] + [str(tmp_path / "o4"), "--var", "sclae=3"]) == 2
+    assert "did you mean 'scale'" in capsys.readouterr().err and not (tmp_path / "o4").exists()
+    assert main(argv[:-1] + [str(tmp_path / "o5"), "--var", "video=x.txt"]) == 2
+    assert "conflicts with the takes" in capsys.readouterr().err
