@@ -114,7 +114,8 @@ def cmd_study(args) -> int:
     _registry(args)
     out = Path(args.out) if args.out else Path("runs") / "studies" / Path(args.study).stem
     cache = Cache(args.cache_dir) if args.cache_dir else Cache()
-    rows = run_study(args.study, out, cache=cache, reporter=Reporter(quiet=args.quiet), executor=args.executor)
+    rows = run_study(args.study, out, cache=cache, reporter=Reporter(quiet=args.quiet), executor=args.executor,
+                     sets=parse_assignments(args.set, "--set"))
     print(to_markdown(rows))
     print(f"tables: {out / 'results.csv'}, {out / 'results.md'}")
     return EXIT_OK if all(r["status"] == "ok" for r in rows) else EXIT_FAILED
@@ -194,6 +195,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("study", allow_abbrev=False, help="run an ablation study")
     s.add_argument("study")
+    s.add_argument("--set", "-s", action="append", metavar="NODE.PARAM=VALUE", help="override a param in every run (repeatable), e.g. a shorter frame range")
     s.add_argument("--out", "-o")
     s.add_argument("--cache-dir")
     s.add_argument("--executor", choices=["local", "dask"], default="local")

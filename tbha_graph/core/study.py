@@ -89,8 +89,11 @@ def run_study(
     registry: Registry | None = None,
     reporter: Reporter | None = None,
     executor: str = "local",
+    sets: dict[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
-    """Run every variant on every input; write results.csv / results.md under ``out_dir``."""
+    """Run every variant on every input; write results.csv / results.md under ``out_dir``. ``sets``
+    (the command line's ``--set``, e.g. a shorter frame range for a quick look) apply to every run (a
+    variant's own ``set:`` of the same param wins); their relative paths start from the current folder."""
     path = Path(path)
     out_dir = Path(out_dir)
     reporter = reporter or Reporter()
@@ -101,6 +104,7 @@ def run_study(
     inputs = study.get("inputs") or {"default": {}}
     rows: list[dict[str, Any]] = []
     cache = cache if cache is not None else Cache()
+    sets_cli = dict(sets or {})
     for vname, variant in study["variants"].items():
         variant = variant or {}
         for iname, inp in inputs.items():
@@ -117,7 +121,15 @@ def run_study(
                 if errs:
                     raise PipelineErrors(errs)
                 sets = {**(inp.get("set") or {}), **(variant.get("set") or {})}
+                if study.get("outputs"):  # nodes no wanted output needs are not built (nor can they fail)
+                    _prune(decl, [str(o) for o in study["outputs"]], keep={str(k).split(".")[0] for k in [*sets, *sets_cli]})
                 vars_ = {**(inp.get("vars") or {}), **(variant.get("vars") or {})}
+                if sets_cli:
+                    from .spec import apply_sets
+
+                    cli_errs = apply_sets(decl, sets_cli, None, "<command line>")
+                    if cli_errs:
+                        raise PipelineErrors(cli_errs)
                 graph = load_graph(base, sets=sets, vars=vars_, registry=registry, decl=decl,
                                    base_dir=path.parent, source=str(path))
                 wanted = study.get("outputs")
@@ -131,12 +143,36 @@ def run_study(
                     row.update(metric_columns(run.output(metrics_name), study.get("columns")))
             except TbhaError as e:
                 row["status"] = "failed"
-                row["error"] = e.format().splitlines()[0][:300]
+                row["error"] = " ".join(ln.strip() for ln in e.format().splitlines())[:400]
                 reporter._print(f"  failed: {e.format()}")
             row["wall_s"] = round(time.perf_counter() - t0, 3)
             rows.append(row)
     write_tables(rows, out_dir)
     return rows
+
+
+def _prune(decl, wanted: list[str], keep: set[str]) -> None:
+    """Drop the nodes and outputs of ``decl`` that the ``wanted`` outputs do not need (nodes in ``keep``
+    stay). Does nothing when a wanted output is not declared (validation then reports it)."""
+    if not wanted or any(w not in decl.outputs for w in wanted):
+        return
+    def node_of(v) -> str | None:
+        ref = getattr(v, "value", v)
+        return ref.split(".", 1)[0] if isinstance(ref, str) and "." in ref else None
+
+    need = {n for n in (node_of(decl.outputs[w]) for w in wanted) if n} | (keep & set(decl.nodes))
+    stack = list(need)
+    while stack:
+        nid = stack.pop()
+        if nid not in decl.nodes:
+            continue
+        for v in decl.nodes[nid].inputs.values():
+            src = node_of(v)
+            if src and src not in need:
+                need.add(src)
+                stack.append(src)
+    decl.nodes = {k: v for k, v in decl.nodes.items() if k in need}
+    decl.outputs = {k: v for k, v in decl.outputs.items() if k in wanted}
 
 
 STUDY_FIRST = ("variant", "input", "status", "wall_s", "ran", "cached")
