@@ -86,6 +86,9 @@ BLENDER_SCRIPT = textwrap.dedent(
 )
 
 
+BPY_INSTALL = "pip install --no-deps bpy==5.0.1"
+
+
 def _bpy_missing() -> str:
     """'' when a child Python can import bpy, else why not."""
     probe = subprocess.run([sys.executable, "-c", "import bpy"], capture_output=True, text=True, timeout=120)
@@ -93,7 +96,8 @@ def _bpy_missing() -> str:
         return ""
     last = (probe.stderr.strip().splitlines() or ["(no message)"])[-1]
     return (f"bpy (Blender as a Python module) is not importable: {last}; "
-            f"install it with `pip install bpy==5.0.1` (see docs/blender.md)")
+            f"install it with `{BPY_INSTALL}` (not a plain `pip install bpy`, which downgrades numpy below 2 "
+            f"and breaks OpenCV; see docs/blender.md)")
 
 
 @pytest.fixture(scope="module")
