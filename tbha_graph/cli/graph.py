@@ -3,6 +3,7 @@
     tbha-graph nodes [TYPE]          list node types, or one type's ports, params and docstring
     tbha-graph validate FILE...      check pipelines without running (all problems at once)
     tbha-graph show FILE [--format text|mermaid|dot] [--png OUT.png]
+    tbha-graph show TYPE             one node type's full documentation (ports, params, docstring)
     tbha-graph schema                JSON Schema of pipeline files for editors
     tbha-graph run FILE ...          same as tbha-run
     tbha-graph study STUDY.yaml      run an ablation study, write results.csv / results.md
@@ -14,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import textwrap
 from pathlib import Path
 
 from ..core.cache import Cache
@@ -37,9 +39,78 @@ def cmd_nodes(args) -> int:
         return EXIT_OK
     for spec in reg.specs():
         print(f"{spec.type:<32} {spec.summary}")
+        fields = spec.params.model_fields
+        if fields:
+            text = "; ".join(param_brief(n, f) for n, f in fields.items())
+            print(textwrap.fill(text, width=110, initial_indent="    params: ", subsequent_indent="            "))
+    print("\n`tbha-graph show TYPE` (or `tbha-graph nodes TYPE`) prints a node's full documentation", file=sys.stderr)
     for f in reg.failures:
         print(f, file=sys.stderr)
     return EXIT_OK
+
+
+def type_name(ann) -> str:
+    """A param's annotation as a reader would write it: int, float | null, one of 'a', 'b', list of str."""
+    import types
+    import typing
+
+    from pydantic import BaseModel
+
+    origin, args = typing.get_origin(ann), typing.get_args(ann)
+    if origin is typing.Annotated:
+        return type_name(args[0])
+    if origin in (typing.Union, types.UnionType):
+        names = [type_name(a) for a in args if a is not type(None)]
+        return " | ".join(names) + (" | null" if type(None) in args else "")
+    if origin is typing.Literal:
+        return "one of " + ", ".join(json.dumps(a) for a in args)
+    if origin in (list, tuple, set, frozenset):
+        inner = [type_name(a) for a in args if a is not Ellipsis]
+        return f"{origin.__name__} of {', '.join(inner)}" if inner else origin.__name__
+    if origin is dict:
+        return f"mapping {type_name(args[0])} -> {type_name(args[1])}" if len(args) == 2 else "mapping"
+    if isinstance(ann, type):
+        if issubclass(ann, BaseModel):
+            return f"{ann.__name__} (mapping)"
+        if ann.__module__ == "pathlib" or ann.__name__.endswith("Path"):
+            return "path"
+        return ann.__name__
+    return str(ann).replace("typing.", "")
+
+
+_BOUNDS = {"Ge": ">=", "Gt": ">", "Le": "<=", "Lt": "<", "MultipleOf": "multiple of", "MinLen": "at least", "MaxLen": "at most"}
+
+
+def constraints(f) -> str:
+    out = []
+    for m in f.metadata:
+        kind = type(m).__name__
+        if kind in _BOUNDS:
+            value = next(iter(vars(m).values()), None) if hasattr(m, "__dict__") else getattr(m, next(iter(m.__dataclass_fields__)))
+            out.append(f"{_BOUNDS[kind]} {value}" + (" items" if kind in ("MinLen", "MaxLen") else ""))
+    return ", ".join(out)
+
+
+def _default_text(f) -> str:
+    if f.is_required():
+        return "required"
+    from pydantic import BaseModel
+
+    d = f.get_default(call_default_factory=True)
+    if isinstance(d, BaseModel):
+        d = d.model_dump(mode="json")
+    return json.dumps(d, default=str)
+
+
+def _unit(f) -> str:
+    extra = f.json_schema_extra if isinstance(f.json_schema_extra, dict) else {}
+    return str(extra.get("unit") or "")
+
+
+def param_brief(name: str, f) -> str:
+    unit = _unit(f)
+    d = _default_text(f)
+    return f"{name}: {type_name(f.annotation)}" + (" (required)" if d == "required" else f" = {d}") + (f" {unit}" if unit else "")
 
 
 def describe_node(spec) -> str:
@@ -53,18 +124,18 @@ def describe_node(spec) -> str:
     lines.append("outputs:")
     for name, t in spec.outputs.items():
         lines.append(f"  {name:<18} {t.describe()}{('  ' + t.doc) if getattr(t, 'doc', '') else ''}")
-    lines.append("params:")
+    lines.append("params:  name  type  default  [unit]  (allowed values)")
     fields = spec.params.model_fields
     if not fields:
         lines.append("  (none)")
     for name, f in fields.items():
-        default = "required" if f.is_required() else f"default {json.dumps(f.get_default(call_default_factory=True), default=str)}"
-        extra = f.json_schema_extra if isinstance(f.json_schema_extra, dict) else {}
-        unit = f" [{extra['unit']}]" if extra.get("unit") else ""
-        cons = " ".join(str(m) for m in f.metadata if type(m).__module__ == "annotated_types")
-        lines.append(f"  {name:<18} {default}{unit}{('  ' + cons) if cons else ''}")
+        d = _default_text(f)
+        default = "required" if d == "required" else f"default {d}"
+        unit = f" [{_unit(f)}]" if _unit(f) else ""
+        cons = constraints(f)
+        lines.append(f"  {name:<18} {type_name(f.annotation)}  {default}{unit}{('  (' + cons + ')') if cons else ''}")
         if f.description:
-            lines.append(f"  {'':<18}   {f.description}")
+            lines.append(textwrap.fill(f.description, width=110, initial_indent=f"  {'':<18}   ", subsequent_indent=f"  {'':<18}   "))
     return "\n".join(lines)
 
 
@@ -88,6 +159,15 @@ def cmd_validate(args) -> int:
 def cmd_show(args) -> int:
     from ..core import show
 
+    if not Path(args.file).exists():
+        reg = _registry(args)
+        if args.file in reg.types():  # `tbha-graph show TYPE`: the node's full documentation
+            print(describe_node(reg.get(args.file)))
+            return EXIT_OK
+        from ..core.errors import TbhaError, did_you_mean
+
+        raise TbhaError(f"'{args.file}' is neither a pipeline file nor a node type{did_you_mean(args.file, [*reg.types()])}",
+                        hint="give a pipeline file (pipelines/default.yaml) or a node type (`tbha-graph nodes` lists them)")
     g = load_graph(args.file, sets=parse_assignments(args.set, "--set"), vars=parse_assignments(args.var, "--var"), registry=_registry(args))
     text = {"text": show.as_text, "mermaid": show.as_mermaid, "dot": show.as_dot}[args.format](g)
     print(text)
@@ -175,8 +255,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--plugin", action="append")
     s.set_defaults(fn=cmd_validate)
 
-    s = sub.add_parser("show", allow_abbrev=False, help="print the DAG (text, Mermaid, DOT) and optionally draw a PNG")
-    s.add_argument("file")
+    s = sub.add_parser("show", allow_abbrev=False, help="print a pipeline's DAG (text, Mermaid, DOT; optionally a PNG), or a node type's documentation")
+    s.add_argument("file", help="pipeline file, or a node type such as segment.hierarchical")
     s.add_argument("--format", choices=["text", "mermaid", "dot"], default="text")
     s.add_argument("--png", help="also draw the DAG into this PNG")
     s.add_argument("--set", action="append")
