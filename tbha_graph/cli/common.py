@@ -71,3 +71,4 @@ def add_run_arguments(p) -> None:
     p.add_argument("--cache-dir", help="cache folder (default: $TBHA_CACHE_DIR or the user cache folder)")
     p.add_argument("--plugin", action="append", metavar="MODULE", help="also register the nodes of this importable module")
     p.add_argument("--quiet", "-q", action="store_true", help="print only errors and the summary")
+    p.add_argument("--verbose", action="store_true", help="print every figure of metrics.json in the summary (docs/metrics.md explains them)")

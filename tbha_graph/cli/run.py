@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import textwrap
 from pathlib import Path
 
 from ..core.cache import Cache
@@ -33,28 +34,59 @@ def run_command(args: argparse.Namespace) -> int:
         print(f"the run failed; no run directory was written to {out_dir}. Nodes that finished are cached: "
               f"fix the problem and run the same command again to resume.", file=sys.stderr)
         return EXIT_FAILED
-    print_summary(run, out_dir)
+    print_summary(run, out_dir, verbose=getattr(args, "verbose", False))
     return EXIT_OK
 
 
-def print_summary(run, out_dir: Path) -> None:
-    """One screen: what ran, the figures of a ``metrics.json`` output if there is one, where outputs are."""
+#: the figures the short summary shows when the metrics have them (every one: --verbose; docs/metrics.md)
+HEADLINE = ("tracked_pct", "reprojection_px_median", "mpjpe_mm", "pa_mpjpe_mm", "focal_px", "camera_height_m",
+            "camera_distance_m", "camera_tilt_deg")
+
+
+def print_summary(run, out_dir: Path, verbose: bool = False) -> None:
+    """At most 15 lines (more with ``verbose``): what ran, the verdict and its reasons, the headline
+    figures of a ``metrics.json`` output, the warnings, where the outputs are."""
     ran = sum(r.status == "ran" for r in run.results.values())
     cached = sum(r.status == "cached" for r in run.results.values())
     print(f"\ndone in {run.seconds:.2f} s: {ran} node(s) ran, {cached} from cache")
+    metrics = None
     if "metrics.json" in run.graph.outputs and run.graph.outputs["metrics.json"][0] in run.results:
         metrics = run.output("metrics.json")
-        if isinstance(metrics, dict):
-            frames = metrics.get("frames")
-            if isinstance(frames, (int, float)) and run.seconds > 0 and ran:
+    warnings = [f"{w['node']}: {w['message']}" for w in run.node_warnings()]
+    if isinstance(metrics, dict):
+        warnings = [str(w) for w in metrics.get("warnings") or []] or warnings
+        frames = metrics.get("frames")
+        fps = f", {frames / run.seconds:.1f} fps achieved" if isinstance(frames, (int, float)) and run.seconds > 0 and ran and not cached else ""
+        if "verdict" in metrics:
+            reasons = [str(r) for r in metrics.get("verdict_reasons") or [] if not str(r).startswith("warning: ")]
+            print(f"  verdict: {metrics['verdict']}" + (f" ({'; '.join(reasons)[:200]})" if reasons else ""))
+        if verbose:
+            if fps:
                 print(f"  {'fps achieved':<28} {frames / run.seconds:.1f}")
             for k, v in metrics.items():
                 if not isinstance(v, (dict, list)):
                     print(f"  {k:<28} {fmt_value(v)}")
-    print(f"outputs in {out_dir}/:")
+        else:
+            if frames is not None:
+                print(f"  {frames} frames{fps}")
+            shown = [k for k in HEADLINE if isinstance(metrics.get(k), (int, float)) and not isinstance(metrics.get(k), bool)]
+            for i in range(0, len(shown), 2):
+                print("  " + "   ".join(f"{k} {fmt_value(metrics[k])}" for k in shown[i : i + 2]))
+    if warnings:
+        print(f"  {len(warnings)} warning(s):")
+        for w in warnings if verbose else warnings[:3]:
+            print(f"    - {w if verbose else w[:160]}")
+        if not verbose and len(warnings) > 3:
+            print(f"    ... and {len(warnings) - 3} more (--verbose, or metrics.json / manifest.json)")
     written = [name for name, (nid, _) in run.graph.outputs.items() if nid in run.results]
-    for name in written + ["manifest.json"]:
-        print(f"  {out_dir / name}")
+    if verbose:
+        print(f"outputs in {out_dir}/:")
+        for name in written + ["manifest.json"]:
+            print(f"  {out_dir / name}")
+    else:
+        print(textwrap.shorten(f"outputs in {out_dir}/: {', '.join(written + ['manifest.json'])}", width=200, placeholder=" ..."))
+        if isinstance(metrics, dict):
+            print("every figure: --verbose or metrics.json (explained in docs/metrics.md)")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -164,6 +164,9 @@ class Context:
       are moved into the cache from here).
     * ``progress(iterable, total=None, desc="")``: wrap a long loop (e.g. over frames) to report progress.
     * ``log(msg)``: a message shown under the node's progress line.
+    * ``warn(msg)``: something the user must know about the result (a doubtful calibration, ...). Kept
+      with the node's cache entry (a cached run reports it again), listed in ``manifest.json`` and the
+      run summary, and added to the run's report output (see :mod:`tbha_graph.core.rundir`).
     """
 
     def __init__(self, node_id: str, params: BaseModel, work_dir: Path | None = None, reporter: Any = None):
@@ -171,6 +174,7 @@ class Context:
         self.params = params
         self._work_dir = work_dir
         self._reporter = reporter
+        self.warnings: list[str] = []
 
     @property
     def work_dir(self) -> Path:
@@ -191,3 +195,8 @@ class Context:
     def log(self, msg: str) -> None:
         if self._reporter is not None:
             self._reporter.log(self.node_id, msg)
+
+    def warn(self, msg: str) -> None:
+        msg = str(msg)
+        if msg not in self.warnings:
+            self.warnings.append(msg)

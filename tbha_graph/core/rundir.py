@@ -67,6 +67,7 @@ def manifest(run: RunResult, executor: str, files: list[str] | None = None) -> d
             "cache_key": res.key,
             "status": res.status,
             "seconds": round(res.seconds, 6),
+            "warnings": list(res.node_warnings),
         }
     return {
         "written_by": "tbha-graph",
@@ -79,6 +80,7 @@ def manifest(run: RunResult, executor: str, files: list[str] | None = None) -> d
         "outputs": {name: f"{n}.{p}" for name, (n, p) in g.outputs.items()},
         "files": sorted(files) if files is not None else None,
         "nodes": nodes,
+        "warnings": run.node_warnings(),
         "packages": package_versions(),
     }
 
@@ -238,7 +240,7 @@ def write_run_dir(run: RunResult, out_dir: Path, executor: str = "local") -> lis
             if nid not in run.results:
                 continue
             bound = run.graph.nodes[nid]
-            value = run.results[nid].value(port, bound)
+            value = run.with_warnings(run.results[nid].value(port, bound))  # a report carries every node's warnings
             t = concrete_type_of(bound.spec.outputs[port], value)
             target = staging / name
             target.parent.mkdir(parents=True, exist_ok=True)

@@ -34,7 +34,8 @@ class NodeResult:
     values: dict[str, Any] | None = None
     entry_path: str | None = None
     entry_meta: dict | None = None
-    warnings: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)  # the framework's (cache trouble)
+    node_warnings: list[str] = field(default_factory=list)  # the node's own (ctx.warn), also when cached
 
     def value(self, port: str, bound: BoundNode) -> Any:
         if self.values is not None and port in self.values:
@@ -54,7 +55,8 @@ class NodeResult:
 
     def light(self) -> "NodeResult":
         """A copy without in-memory values (to send between processes when values live in the cache)."""
-        return NodeResult(self.node_id, self.status, self.key, self.seconds, self.fingerprints, None, self.entry_path, self.entry_meta, self.warnings)
+        return NodeResult(self.node_id, self.status, self.key, self.seconds, self.fingerprints, None, self.entry_path, self.entry_meta, self.warnings,
+                          self.node_warnings)
 
 
 def _normalise_outputs(bound: BoundNode, out: Any) -> dict[str, Any]:
@@ -101,8 +103,9 @@ def execute_node(
         if entry is not None:
             outs = entry.meta.get("outputs", {})
             if set(outs) == set(spec.outputs):
+                nw = [str(w) for w in entry.meta.get("node_warnings", []) if isinstance(w, str)]
                 return NodeResult(bound.id, "cached", key, time.perf_counter() - t0,
-                                  {p: outs[p]["fingerprint"] for p in outs}, None, str(entry.path), entry.meta, warnings)
+                                  {p: outs[p]["fingerprint"] for p in outs}, None, str(entry.path), entry.meta, warnings, nw)
             warnings.append(f"cache entry {key[:12]} of node '{bound.id}' has the wrong outputs; recomputing")
             cache.remove(key)
 
@@ -121,11 +124,12 @@ def execute_node(
         tb = "".join(traceback.format_exception(type(e), e, e.__traceback__)[-6:])
         raise NodeFailed(f"{type(e).__name__}: {e}", node=bound.id, hint=f"this looks like a bug in node type '{spec.type}'; traceback:\n{tb}") from e
     if cache is None:
-        return NodeResult(bound.id, "ran", None, time.perf_counter() - t0, {p: None for p in out}, out, None, None, warnings)
-    info = {"type": spec.type, "node_version": spec.version, "node_id": bound.id, "seconds": time.perf_counter() - t0}
+        return NodeResult(bound.id, "ran", None, time.perf_counter() - t0, {p: None for p in out}, out, None, None, warnings, list(ctx.warnings))
+    info = {"type": spec.type, "node_version": spec.version, "node_id": bound.id, "seconds": time.perf_counter() - t0,
+            "node_warnings": list(ctx.warnings)}
     entry, values = cache.store(key, {p: (spec.outputs[p], v) for p, v in out.items()}, info)
     return NodeResult(bound.id, "ran", key, time.perf_counter() - t0,
-                      {p: entry.meta["outputs"][p]["fingerprint"] for p in out}, values, str(entry.path), entry.meta, warnings)
+                      {p: entry.meta["outputs"][p]["fingerprint"] for p in out}, values, str(entry.path), entry.meta, warnings, list(ctx.warnings))
 
 
 @dataclass
@@ -137,12 +141,45 @@ class RunResult:
     seconds: float
 
     def output(self, name_or_ref: str) -> Any:
-        """Value of a named pipeline output (``"motion.bvh"``) or of ``"node.port"``."""
+        """Value of a named pipeline output (``"motion.bvh"``) or of ``"node.port"``. A report (a mapping
+        with a ``verdict``) carries every node's warnings: see :meth:`with_warnings`."""
         ref = self.graph.outputs.get(name_or_ref)
         if ref is None:
             node_id, port = name_or_ref.split(".", 1)
             ref = (node_id, port)
-        return self.results[ref[0]].value(ref[1], self.graph.nodes[ref[0]])
+        return self.with_warnings(self.results[ref[0]].value(ref[1], self.graph.nodes[ref[0]]))
+
+    def node_warnings(self) -> list[dict[str, str]]:
+        """Every warning a node gave (``ctx.warn``), in run order, also for nodes that came from the cache."""
+        return [{"node": nid, "message": w} for nid, r in self.results.items() for w in r.node_warnings]
+
+    def with_warnings(self, value: Any) -> Any:
+        """A report output — a mapping with a ``verdict`` ("ok" | "doubtful" | "failed") — gets every
+        node's warning added to its ``warnings`` list (once each); an "ok" verdict with warnings becomes
+        "doubtful", the warning's node named in ``verdict_reasons``. Other values are returned as they are."""
+        if not isinstance(value, dict) or "verdict" not in value:
+            return value
+        found = self.node_warnings()
+        if not found:
+            return value
+        out = dict(value)
+        warnings = [str(w) for w in out.get("warnings") or []]
+        reasons = [str(r) for r in out.get("verdict_reasons") or []]
+        added = []
+        for w in found:
+            if w["message"] not in warnings and not any(w["message"] in x for x in warnings):
+                warnings.append(f"{w['node']}: {w['message']}")
+                added.append(w)
+        out["warnings"] = warnings
+        nodes = sorted({w["node"] for w in found})
+        if out.get("verdict") == "ok":
+            out["verdict"] = "doubtful"
+        for n in nodes:
+            r = f"node '{n}' gave a warning"
+            if r not in reasons:
+                reasons.append(r)
+        out["verdict_reasons"] = reasons
+        return out
 
 
 def targets_of(graph: Graph, outputs: list[str] | None) -> list[str]:
@@ -186,6 +223,8 @@ def run_local(
                 res = execute_node(bound, graph, results, cache, reporter, work_root)
                 for w in res.warnings:
                     reporter.warn(w)
+                for w in res.node_warnings:
+                    reporter.warn(f"{nid}: {w}")
                 reporter.node_done(nid, bound.spec.type, res.status, res.seconds)
                 results[nid] = res
                 i += 1

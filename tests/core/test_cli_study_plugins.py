@@ -32,7 +32,7 @@ def cli(main, argv, capsys):
 def test_tbha_run_writes_run_dir_and_summary(write, tmp_path, capsys, monkeypatch):
     monkeypatch.setenv("TBHA_CACHE_DIR", str(tmp_path / "c"))
     p = write("p.yaml", CHAIN)
-    code, out, err = cli(run_cli.main, [str(p), "--out", str(tmp_path / "run")], capsys)
+    code, out, err = cli(run_cli.main, [str(p), "--out", str(tmp_path / "run"), "--verbose"], capsys)
     assert code == 0, err
     assert "ran" in err and "fps achieved" in out and "mean" in out and str(tmp_path / "run" / "sum.npz") in out
     assert json.loads((tmp_path / "run" / "metrics.json").read_text())["mean"] == 10.0

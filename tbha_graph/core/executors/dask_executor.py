@@ -70,6 +70,8 @@ def run_dask(graph: Graph, node_ids: list[str], cache: Cache | None, reporter: R
                 raise
             for w in res.warnings:
                 reporter.warn(w)
+            for w in res.node_warnings:
+                reporter.warn(f"{nid}: {w}")
             reporter.node_done(nid, graph.nodes[nid].spec.type, res.status, res.seconds)
             results[nid] = res
         return {nid: results[nid] for nid in order}

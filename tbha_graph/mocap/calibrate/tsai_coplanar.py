@@ -217,4 +217,5 @@ def tsai_coplanar(ctx, tracks, body):
             "the view is close to degenerate for coplanar Tsai (torso nearly parallel to the image or spine through the "
             "image centre): small 2D errors move the camera a lot; use more joints, a known focal_px, or calibrate.pnp"
         )
+        ctx.warn(extra["warning"])  # reaches manifest.json, metrics.json and the summary
     return {"camera": cam.to_model(), "report": calibration_report(cam, world, image, used, extra, p.joints)}

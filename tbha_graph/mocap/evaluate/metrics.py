@@ -53,6 +53,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from ...core.errors import NodeError
 from ...core.node import node, optional
 from ...core.types import Array, Arrays, Json
+from .verdict import verdict
 from ..io.ground_truth import TRUTH, check_ground_truth, truth_joints2d, truth_visibility
 from ..ports import CAMERA, METRICS, MOTION, TRACKS2D
 from ..reconstruct.body import DEFAULT_ANKLE_HEIGHT
@@ -277,4 +278,5 @@ def metrics(ctx, motion, tracks, camera, truth, raw_motion, extra):
         notes = [w for w in extra.get("warnings", []) if isinstance(w, str)]
         if notes:  # warnings of the node that made the report reach the metrics (and the summary)
             result["warnings"] = list(result.get("warnings", [])) + [w for w in notes if w not in result.get("warnings", [])]
+    result["verdict"], result["verdict_reasons"] = verdict(result)  # ok | doubtful | failed (evaluate/verdict.py)
     return {"metrics": result, "errors": errors}
