@@ -37,5 +37,32 @@ def test_seed_pipeline_reports_the_calibration_warning_and_a_short_summary(tmp_p
     assert any(w.startswith("calibrate: the view is close to degenerate") for w in m["warnings"])
     assert "node 'calibrate' gave a warning" in m["verdict_reasons"]
     assert any("verdict: doubtful" in ln for ln in lines) and any("close to degenerate" in ln for ln in lines)
+    documented = (ROOT / "docs" / "metrics.md").read_text()
+    assert [k for k in m if f"`{k}`" not in documented] == []
     manifest = json.loads((out / "manifest.json").read_text())
     assert [w["node"] for w in manifest["warnings"]] == ["calibrate"]
+
+
+def test_error_plot_legend_agrees_with_metrics_json(tmp_path):
+    """errors.png's legend gives each 3D curve's mean over frames: metrics.json's mpjpe_mm / pa_mpjpe_mm."""
+    from tbha_graph.core.runner import load_graph, run_graph
+    from tbha_graph.mocap.viz.error_plot import legend_label
+
+    g = load_graph(ROOT / "pipelines" / "seed.yaml", sets={"decode.stop": 60, "truth.stop": 60})
+    run = run_graph(g, outputs=["metrics"], cache=False)
+    metrics, errors = run.output("metrics.metrics"), run.output("metrics.errors")
+    for key in ("mpjpe_mm", "pa_mpjpe_mm"):
+        assert legend_label("x", errors[key], "mm") == f"x (mean over frames {metrics[key]:.3g} mm)"
+
+
+def test_docs_list_every_key_of_the_default_pipelines_metrics():
+    """Keys of the whole-take solver's report and the metrics node's own, as listed in its module doc."""
+    import re
+
+    import tbha_graph.mocap.evaluate.metrics as metrics_module
+
+    documented = (ROOT / "docs" / "metrics.md").read_text()
+    named = set(re.findall(r"``([a-z0-9_]+_(?:mm|px|pct|m_s2|m_s3|ms|deg|m|median|p95))``", metrics_module.__doc__.split("Output ``errors``")[0]))
+    assert named and [k for k in sorted(named) if f"`{k}`" not in documented] == []
+    for k in ("focal_px", "focal_sd_pct", "camera_height_m", "camera_distance_m", "camera_tilt_deg", "verdict", "warnings"):
+        assert f"`{k}`" in documented

@@ -5,7 +5,9 @@ With ground truth: top panel, 3D joint error in mm (``mpjpe_mm`` after the clip 
 ``pa_mpjpe_mm`` dashed); bottom panel, 2D error in px (``error_2d_px``, tracks vs truth) and the
 reprojection error in px (``reprojection_px``, 3D motion projected vs tracks). Without ground truth
 (``mpjpe_mm`` all NaN): one panel, the reprojection error. The x axis is time in seconds (frame / fps);
-each legend entry gives the curve's median. Gaps (NaN) are left as breaks in the curves. Frames whose
+each legend entry gives the curve's mean over frames — for the 3D curves exactly ``metrics.json``'s
+``mpjpe_mm`` / ``pa_mpjpe_mm`` (every frame has all 16 joints); the 2D curves' means are named as such
+(``metrics.json`` gives medians and 95th percentiles over all points for those). Gaps (NaN) are left as breaks in the curves. Frames whose
 labelling is doubtful (``doubtful`` in the bundle, see :mod:`tbha_graph.mocap.evaluate.doubtful`) are
 shaded orange in every panel.
 """
@@ -17,7 +19,6 @@ from pydantic import BaseModel, ConfigDict, Field
 from ...core.errors import NodeError
 from ...core.node import node
 from ...core.types import File
-from ..evaluate.measures import nan_percentile
 from ..evaluate.metrics import ERRORS
 from . import style
 from .png import new_figure, save_png
@@ -30,11 +31,16 @@ class ErrorPlotParams(BaseModel):
     dpi: int = Field(120, ge=50, le=400, description="resolution of the PNG", json_schema_extra={"unit": "dots/inch"})
 
 
+def legend_label(label: str, y: np.ndarray, unit: str) -> str:
+    """A curve's legend entry: its name and its mean over frames (NaN frames left out)."""
+    return f"{label} (mean over frames {float(np.nanmean(y)):.3g} {unit})"
+
+
 def _curve(ax, t: np.ndarray, y: np.ndarray, label: str, unit: str, color, **kw) -> bool:
-    """Plot ``y`` against ``t`` labelled with its median; False (nothing drawn) when ``y`` is all NaN."""
+    """Plot ``y`` against ``t`` labelled with its mean; False (nothing drawn) when ``y`` is all NaN."""
     if not np.isfinite(y).any():
         return False
-    ax.plot(t, y, color=style.rgb(color), lw=1.2, label=f"{label} (median {nan_percentile(y, 50):.3g} {unit})", **kw)
+    ax.plot(t, y, color=style.rgb(color), lw=1.2, label=legend_label(label, y, unit), **kw)
     return True
 
 
