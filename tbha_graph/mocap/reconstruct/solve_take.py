@@ -58,14 +58,14 @@ class SolveTakeParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     focal_px: float | None = Field(None, gt=0, description="known focal length (held fixed); None: estimated from the take", json_schema_extra={"unit": "px"})
-    focal_grid: list[float] = Field([0.8, 1.2, 1.7], min_length=1, description="starting focal lengths tried, as multiples of the image width")
+    focal_grid: list[float] = Field([0.8, 1.1, 1.5], min_length=1, description="starting focal lengths tried, as multiples of the image width")
     focal_prior_width: float = Field(1.2, gt=0, description="centre of the weak focal-length prior, as a multiple of the image width")
     focal_prior_log_sd: float = Field(0.35, gt=0, description="standard deviation of log(focal) in that prior (0.35: x/÷ 1.4)")
     tpose_frames: int = Field(10, ge=1, description="opening T-pose frames used to place the first skeleton")
     window: int = Field(150, ge=20, description="frames per solving window (cost grows linearly with the take)")
     overlap: int = Field(30, ge=4, description="frames shared by consecutive windows (blended)")
     calib_frames: int = Field(70, ge=20, description="frames (spread over the take) used to solve focal, floor and point offsets")
-    max_iterations: int = Field(15, ge=1, description="Levenberg-Marquardt iterations on the whole take")
+    max_iterations: int = Field(12, ge=1, description="Levenberg-Marquardt iterations on the whole take")
     calib_iterations: int = Field(10, ge=1, description="Levenberg-Marquardt iterations per start on the frame subsample")
     sigma_px: float = Field(1.0, gt=0, description="2D tracking noise", json_schema_extra={"unit": "px"})
     sigma_acc: float = Field(30.0, gt=0, description="typical joint acceleration (smoothness prior)", json_schema_extra={"unit": "m/s^2"})
@@ -175,7 +175,7 @@ def detect_contacts(P: np.ndarray, nf: np.ndarray, d: float, fps: float, ankle_h
     return low & (v < 0.35)
 
 
-COMPARED_TERMS = ("reprojection", "torso", "hinge", "below_floor", "acceleration", "contact", "slide", "priors")
+COMPARED_TERMS = ("reprojection", "torso", "hinge", "below_floor", "acceleration", "contact", "slide", "pose", "priors")
 
 
 def globals_vector(f: float, d: float, free_offsets: bool) -> np.ndarray:
@@ -280,8 +280,9 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
     weight = tracked.astype(np.float64)
     report: dict = {"frames": n}
     warnings_out: list[str] = []
-    # 1. on a frame subsample spread over the take: for each starting focal length (or the known one), a
-    #    first skeleton, LM with the focal length free, the depth-side search, LM again; keep the cheapest
+    # for each starting focal length (or the known one): a first skeleton; on a frame subsample spread over
+    # the take, LM, the depth-side search and LM again; then every frame from that solution (interpolated),
+    # LM with the focal length and floor free. The start whose whole-take cost is lowest wins.
     step = max(1, int(np.ceil(n / p.calib_frames)))
     sub = np.arange(0, n, step)
     if p.focal_px is not None:
@@ -293,50 +294,34 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
         report["focal_source"] = "estimated from the take"
     contact = contacts_from_image(points, tracked, fps)
     report["planted_pct"] = [round(float(c) * 100, 1) for c in contact.mean(axis=0)]
-    best, sweep = None, []
+    best, sweep, kept1 = None, [], 0
     for k, f0 in enumerate(starts):
         try:
             P0, cam = first_skeleton(points, tracked, lengths, f0, centre, width, height, fps, p)
         except (NodeError, ValueError):
             continue
         g0 = globals_vector(f0, float(-cam.R[:, 1] @ cam.t), False)
-        probs, xs, _, _, _ = solve_frames(points[sub], weight[sub], lengths, centre, fps / step, P0[sub], cam, g0, p,
-                                          p.calib_iterations, False, focal_prior, False, contact[sub])
-        terms = probs.term_costs(xs)
-        score = sum(terms[t] for t in COMPARED_TERMS)
-        f_end = float(np.exp(probs.globals_of(xs)[0]))
-        sweep.append([round(f0, 1), round(f_end, 1), round(score, 1)])
-        if best is None or score < best[0]:
-            best = (score, probs, xs)
+        probs, xs, _, _, kept = solve_frames(points[sub], weight[sub], lengths, centre, fps / step, P0[sub], cam, g0, p,
+                                             p.calib_iterations, False, focal_prior, p.side_search, contact[sub])
+        g_sub = probs.globals_of(xs)
+        nf0, d0 = probs.floor(g_sub)
+        P1 = interpolate_joints(probs.joints_from_frames(probs.frames_of(xs)), sub, n)
+        gs = np.concatenate([g_sub[:1], [0.0, 0.0, d0]])
+        prob_k, x_k, cost_k, ne_k, _ = solve_frames(points, weight, lengths, centre, fps, P1, (nf0, d0), gs, p,
+                                                    p.max_iterations, False, focal_prior, False, contact)
+        f_end = float(np.exp(prob_k.globals_of(x_k)[0]))
+        sweep.append([round(f0, 1), round(f_end, 1), round(cost_k, 1)])
+        if best is None or cost_k < best[0]:
+            best, kept1 = (cost_k, prob_k, x_k, ne_k), kept
         if progress:
-            progress(k + 1, len(starts) + 2)
+            progress(k + 1, len(starts))
     if best is None:
         raise NodeError("no starting focal length gave a first skeleton",
                         hint="check that the take opens with a T-pose facing the camera, or set focal_px")
     report["focal_sweep"] = sweep
-    _, probs, xs = best
-    kept1 = 0
-    if p.side_search:  # the depth sides of the best start, searched on the subsample, then LM again
-        g = probs.globals_of(xs).copy()
-        Ps, kept1 = search_sides(probs, probs.joints_from_frames(probs.frames_of(xs)), g)
-        nf0, d0 = probs.floor(g)
-        probs, _ = make_problem(points[sub], weight[sub], lengths, centre, fps / step, Ps, (nf0, d0), p, False,
-                                focal_prior, contact[sub])
-        g[1:3] = 0.0
-        xs, _, _, _ = levenberg_marquardt(probs, np.concatenate([g, pack_initial(Ps, probs.ref)]), p.calib_iterations)
-        if progress:
-            progress(len(starts) + 1, len(starts) + 2)
-    g_sub = probs.globals_of(xs)
-    nf, d = probs.floor(g_sub)
-    # 2. every frame: start from the subsample's solution interpolated (bone directions), LM with the globals
-    Psub = probs.joints_from_frames(probs.frames_of(xs))
-    P0 = interpolate_joints(Psub, sub, n)
-    gs = np.concatenate([g_sub[:1], [0.0, 0.0, d]])
-    prob, x, cost, ne, kept2 = solve_frames(points, weight, lengths, centre, fps, P0, (nf, d), gs, p,
-                                            p.max_iterations, False, focal_prior, False, contact)
+    cost, prob, x, ne = best
+    kept2 = 0
     f, nf, d, offs, P = prob.solution(x)
-    if progress:
-        progress(len(starts) + 2, len(starts) + 2)
     # uncertainty of the focal length (log f) from the normal equations, scaled by the fit's residual level
     terms = prob.term_costs(x)
     dof = max(prob.residuals(x).size - x.size, 1)

@@ -60,7 +60,7 @@ DEFAULT_POINT_OFFSETS = np.array([
     [0.000, 0.105],   # hips: on the belly
     [0.000, 0.103],   # chest
     [0.000, 0.085],   # neck
-    [0.090, -0.020],  # head: hair centre above the skull base
+    [0.066, 0.000],   # head: centre of the (dark-haired) head above the skull base
     [0.000, 0.055],   # left_shoulder
     [0.000, 0.052],   # left_elbow
     [0.000, 0.038],   # left_wrist
@@ -146,7 +146,8 @@ class Weights:
     sigma_hinge: float = 0.05    # wrong-way bending (unit vectors' dot product)
     sigma_floor: float = 0.01    # ankle below the floor / planted ankle off it, metres
     sigma_slide: float = 0.005   # planted ankle moving per frame, metres
-    contact_band: float = 0.0    # a planted ankle may rise this far above its standing height without cost, metres
+    sigma_pose: float = 0.5      # weak pose prior: head along the neck, pelvis facing as the thorax (unit vectors)
+    contact_band: float = 0.03   # a planted ankle may rise this far above its standing height (heel and toe roll), metres
     sigma_offset: float = 0.03   # point offsets around their defaults, metres
     robust_scale: float = 2.0    # reprojection residuals beyond this many sigmas count as soft-L1 (outliers)
 
@@ -184,8 +185,9 @@ class Layout:
 
 
 #: Residuals per frame that depend on that frame alone: reprojection (16 x 2), torso distances, hinges,
-#: ankle below the floor (2), planted ankle off the floor (2).
-N_FRAME_RES = N_JOINTS * 2 + len(TORSO_PAIRS) + len(HINGES) + 4
+#: ankle below the floor (2), planted ankle off the floor (2), pose prior (head along the neck, 3; pelvis
+#: facing where the thorax faces, 3).
+N_FRAME_RES = N_JOINTS * 2 + len(TORSO_PAIRS) + len(HINGES) + 4 + 6
 
 
 class TakeProblem:
@@ -269,7 +271,9 @@ class TakeProblem:
         h = P[:, ANKLES] @ nf + dfl - d.ankle_height  # (n, 2) metres above where they rest
         below = np.minimum(h, 0.0) / w.sigma_floor
         on = np.where(d.contact, np.maximum(h - w.contact_band, 0.0), 0.0) / w.sigma_floor
-        return np.concatenate([rep, torso, np.stack(hin, axis=1), below, on], axis=1)
+        head = (unit(P[:, J["head"]] - P[:, J["neck"]]) - unit(P[:, J["neck"]] - P[:, J["chest"]])) / w.sigma_pose
+        twist = (pelvis - thorax) / w.sigma_pose
+        return np.concatenate([rep, torso, np.stack(hin, axis=1), below, on, head, twist], axis=1)
 
     def slide_vectors(self, P: np.ndarray, nf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Horizontal steps ``(n, 2, 3)`` of the ankles since the previous frame (0 on frame 0) and the mask
@@ -309,8 +313,8 @@ class TakeProblem:
         P = self.joints_from_frames(self.frames_of(x))
         F = self.frame_terms(P, g)
         acc, slide = self.coupled_terms(P, self.floor(g)[0])
-        k = np.cumsum([0, N_JOINTS * 2, len(TORSO_PAIRS), len(HINGES), 2, 2])
-        names = ("reprojection", "torso", "hinge", "below_floor", "contact")
+        k = np.cumsum([0, N_JOINTS * 2, len(TORSO_PAIRS), len(HINGES), 2, 2, 6])
+        names = ("reprojection", "torso", "hinge", "below_floor", "contact", "pose")
         out = {nm: 0.5 * float(np.sum(F[:, k[i]:k[i + 1]] ** 2)) for i, nm in enumerate(names)}
         out.update(acceleration=0.5 * float(np.sum(acc ** 2)), slide=0.5 * float(np.sum(slide ** 2)),
                    priors=0.5 * float(np.sum(self.global_terms(g) ** 2)))
@@ -723,7 +727,7 @@ def window_cost(prob: TakeProblem, P: np.ndarray, g: np.ndarray, lo: int, hi: in
     return 0.5 * float(r @ r)
 
 
-def search_sides_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, iterations: int = 3, margin: int = 3,
+def search_sides_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, iterations: int = 2, margin: int = 2,
                     groups: tuple[tuple[int, ...], ...] = SIDE_GROUPS) -> tuple[np.ndarray, int]:
     """Discrete search over depth sides with local re-optimisation: for each group of bones
     (:data:`SIDE_GROUPS`) and each out-of-plane run of frames (:func:`flip_segments`), the run is mirrored
