@@ -353,7 +353,7 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
         cost={k: round(v, 2) for k, v in terms.items()},
     )
     # a second start ending at a clearly different focal length at a similar cost: the take cannot tell them apart
-    rivals = [fe for f0, fe, c in sweep if abs(np.log(fe / f)) > np.log(1.1) and c < 1.25 * min(c2 for _, _, c2 in sweep)]
+    rivals = [fe for f0, fe, c in sweep if abs(np.log(fe / f)) > np.log(1.1) and c < 1.05 * min(c2 for _, _, c2 in sweep)]
     if rivals:
         report["focal_rivals_px"] = [round(r, 1) for r in rivals]
         warnings_out.append(f"the focal length is ambiguous: {f:.0f} px fits, but so does {rivals[0]:.0f} px nearly as well; "
