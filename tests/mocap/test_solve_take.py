@@ -73,7 +73,7 @@ def test_block_normal_equations_equal_the_dense_ones(truth, free_offsets):
     assert np.allclose(prob.jacobian(x).toarray(), J, atol=1e-6 * np.abs(J).max())
 
 
-WEAK = Weights(sigma_acc=1e3, sigma_torso=1e3, sigma_hinge=1e3, sigma_floor=1e3, sigma_slide=1e3)
+WEAK = Weights(sigma_acc=1e3, sigma_torso=1e3, sigma_hinge=1e3, sigma_floor=1e3, sigma_slide=1e3, sigma_pose=1e3)
 
 
 def test_noise_free_take_is_recovered_exactly_with_its_focal_length(truth):
@@ -97,7 +97,7 @@ def test_noise_free_take_is_recovered_exactly_with_its_focal_length(truth):
 
 def test_focal_length_from_a_noise_free_take(truth):
     """Exact 2D of the whole walk (200 frames, 0.9 m towards the camera), joints started at the truth, focal
-    6 % off. Measured: 683 px for 700 (2.4 %): the take constrains the focal length only weakly (a head or
+    6 % off. Measured: 686 px for 700 (2.0 %): the take constrains the focal length only weakly (a head or
     wrist swinging to its other depth side absorbs the rest), far from the 0.1 % the issue asks for; this
     bound guards what is reached."""
     P, uv, centre, L = synthetic(truth, 200, start=10)
@@ -105,7 +105,7 @@ def test_focal_length_from_a_noise_free_take(truth):
     x = np.concatenate([globals_vector(660.0, d, False), pack_initial(P, prob.ref)])
     x, _, _, _ = levenberg_marquardt(prob, x, 20, tol=1e-14)
     f = prob.solution(x)[0]
-    assert abs(f / 700.0 - 1.0) < 0.036
+    assert abs(f / 700.0 - 1.0) < 0.03
 
 
 def test_mirror_keeps_the_image_and_the_bones(truth):
@@ -158,8 +158,8 @@ def test_solver_on_the_sample_tracks_given_the_focal_length(truth, tmp_path):
     aligned, _ = align_clip(out["joints"], gt, "rigid")
     seq = np.linalg.norm(aligned - gt, axis=-1).mean() * 1000
     assert seq < SAMPLE_SEQ_BOUND_MM
-    assert abs(out["report"]["camera_height_m"] - 1.45) < 0.1
-    assert out["joints"][:, [12, 15], 1].min() > 0.08 - 0.02  # no ankle 2 cm below its resting height
+    assert abs(out["report"]["camera_height_m"] - 1.45) < 0.12  # measured 1.37 m
+    assert out["joints"][:, [12, 15], 1].min() > 0.08 - 0.008  # measured 5 mm below its resting height at worst
 
 
-SAMPLE_SEQ_BOUND_MM = 90.0
+SAMPLE_SEQ_BOUND_MM = 110.0  # measured 73.7 mm
