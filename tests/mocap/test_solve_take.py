@@ -41,22 +41,23 @@ def synthetic(truth, n: int, f: float = 700.0, start: int = 60):
     return P, f * Q[..., :2] / Q[..., 2:3] + centre, centre, L
 
 
-def problem(truth, P, uv, centre, L, weights: Weights, free_offsets=False, focal_prior=None):
+def problem(truth, P, uv, centre, L, weights: Weights, free_offsets=False, focal_prior=None, free_lengths=False):
     R = truth["R"]
     nf, d = R[:, 1], float(-R[:, 1] @ truth["t"])
     fps = float(truth["fps"])
     contact = contacts_from_image(uv, np.ones(uv.shape[:2], bool), fps)
     data = TakeData(uv, np.ones(uv.shape[:2]), L, centre, fps, 0.08, contact, rest_pair_distances(L, 0.08))
     prob = TakeProblem(data, bone_directions(P), nf, weights, DEFAULT_POINT_OFFSETS.copy(), free_offsets=free_offsets,
-                       focal_prior=focal_prior)
+                       focal_prior=focal_prior, free_lengths=free_lengths)
     return prob, d
 
 
-@pytest.mark.parametrize("free_offsets", [False, True])
-def test_block_normal_equations_equal_the_dense_ones(truth, free_offsets):
+@pytest.mark.parametrize("free_offsets,free_lengths", [(False, False), (True, False), (False, True)])
+def test_block_normal_equations_equal_the_dense_ones(truth, free_offsets, free_lengths):
     P, uv, centre, L = synthetic(truth, 9)
-    prob, d = problem(truth, P, uv + 0.7, centre, L, Weights(), free_offsets=free_offsets)
-    x = np.concatenate([globals_vector(660.0, d, free_offsets), pack_initial(P, prob.ref)])
+    prob, d = problem(truth, P, uv + 0.7, centre, L, Weights(), free_offsets=free_offsets, free_lengths=free_lengths)
+    lu = 0.02 * np.random.default_rng(2).standard_normal(15)
+    x = np.concatenate([globals_vector(660.0, d, free_offsets, free_lengths, lu), pack_initial(P, prob.ref)])
     x[prob.n_glob:] += 0.01 * np.random.default_rng(1).standard_normal(x.size - prob.n_glob)
     r0 = prob.residuals(x)
     J = np.empty((r0.size, x.size))

@@ -47,7 +47,7 @@ from ..calibrate.pnp import solve_pnp_planar
 from ..camera import Camera
 from ..ports import CAMERA, MOTION, TRACKS2D
 from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS
-from .body import DEFAULT_ANKLE_HEIGHT, body_lengths, tpose_on_floor
+from .body import DEFAULT_ANKLE_HEIGHT, body_lengths, lengths_to_body, tpose_on_floor
 from .take_model import (ANKLES, DEFAULT_POINT_OFFSETS, PER_FRAME, TORSO_PAIRS, TakeData, TakeProblem, Weights,
                          bone_directions, fronts, pack_initial, point_positions, unit, levenberg_marquardt)
 from .take_model import search_sides_lm as search_sides
@@ -70,8 +70,10 @@ class SolveTakeParams(BaseModel):
     sigma_px: float = Field(1.0, gt=0, description="2D tracking noise", json_schema_extra={"unit": "px"})
     sigma_acc: float = Field(30.0, gt=0, description="typical joint acceleration (smoothness prior)", json_schema_extra={"unit": "m/s^2"})
     ankle_height: float = Field(DEFAULT_ANKLE_HEIGHT, ge=0, le=0.3, description="ankle joint height above the floor when standing", json_schema_extra={"unit": "m"})
-    free_offsets: bool = Field(True, description="estimate where each tracked point sits on the body (else the suit defaults)")
+    free_offsets: bool = Field(False, description="estimate where each tracked point sits on the body (else the suit defaults)")
+    free_lengths: bool = Field(False, description="refine the bone lengths from the take around the body's (3 % prior); measured on the sample: no better, so off")
     side_search: bool = Field(True, description="re-decide limbs' depth sides over time segments by total cost")
+    cross_seed: bool = Field(True, description="re-solve the best start's depth sides at the other starts' focal lengths")
 
 
 def tpose_camera(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarray, f: float, centre: np.ndarray,
@@ -178,9 +180,13 @@ def detect_contacts(P: np.ndarray, nf: np.ndarray, d: float, fps: float, ankle_h
 COMPARED_TERMS = ("reprojection", "torso", "hinge", "below_floor", "acceleration", "contact", "slide", "pose", "priors")
 
 
-def globals_vector(f: float, d: float, free_offsets: bool) -> np.ndarray:
-    """Globals ``[log f, floor tangent (2), floor offset, point offsets (32, if free)]`` at a start."""
-    return np.concatenate([[np.log(f), 0.0, 0.0, d], np.zeros(2 * N_JOINTS if free_offsets else 0)])
+def globals_vector(f: float, d: float, free_offsets: bool, free_lengths: bool = False,
+                   length_updates: np.ndarray | None = None) -> np.ndarray:
+    """Globals ``[log f, floor tangent (2), floor offset, point offsets (32, if free), bone length log-updates
+    (15, if free)]`` at a start."""
+    lu = np.zeros(N_JOINTS - 1) if length_updates is None else np.asarray(length_updates, dtype=np.float64)
+    return np.concatenate([[np.log(f), 0.0, 0.0, d], np.zeros(2 * N_JOINTS if free_offsets else 0),
+                           lu if free_lengths else np.zeros(0)])
 
 
 def rest_pair_distances(lengths: np.ndarray, ankle_height: float) -> np.ndarray:
@@ -212,7 +218,7 @@ def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: Solve
                     rest_pair_distances(lengths, p.ankle_height))
     w = Weights(sigma_px=p.sigma_px, sigma_acc=p.sigma_acc)
     return TakeProblem(data, bone_directions(P), nf, w, DEFAULT_POINT_OFFSETS.copy(), free_offsets=free_offsets,
-                       focal_prior=focal_prior), d
+                       focal_prior=focal_prior, free_lengths=p.free_lengths), d
 
 
 def solve_frames(points, weight, lengths, centre, fps, P0, floor, g_start, p, iterations, free_offsets, focal_prior,
@@ -225,7 +231,7 @@ def solve_frames(points, weight, lengths, centre, fps, P0, floor, g_start, p, it
     kept = 0
     if side_search:
         g = prob.globals_of(x).copy()
-        P = prob.joints_from_frames(prob.frames_of(x))
+        P = prob.solution(x)[4]
         P, kept = search_sides(prob, P, g)
         nf, d = prob.floor(g)
         prob, _ = make_problem(points, weight, lengths, centre, fps, P, (nf, d), p, free_offsets, focal_prior, contact)
@@ -300,13 +306,13 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
             P0, cam = first_skeleton(points, tracked, lengths, f0, centre, width, height, fps, p)
         except (NodeError, ValueError):
             continue
-        g0 = globals_vector(f0, float(-cam.R[:, 1] @ cam.t), False)
+        g0 = globals_vector(f0, float(-cam.R[:, 1] @ cam.t), False, p.free_lengths)
         probs, xs, _, _, kept = solve_frames(points[sub], weight[sub], lengths, centre, fps / step, P0[sub], cam, g0, p,
                                              p.calib_iterations, False, focal_prior, p.side_search, contact[sub])
         g_sub = probs.globals_of(xs)
         nf0, d0 = probs.floor(g_sub)
-        P1 = interpolate_joints(probs.joints_from_frames(probs.frames_of(xs)), sub, n)
-        gs = np.concatenate([g_sub[:1], [0.0, 0.0, d0]])
+        P1 = interpolate_joints(probs.solution(xs)[4], sub, n)
+        gs = np.concatenate([g_sub[:1], [0.0, 0.0, d0], g_sub[4:]])
         prob_k, x_k, cost_k, ne_k, _ = solve_frames(points, weight, lengths, centre, fps, P1, (nf0, d0), gs, p,
                                                     p.max_iterations, False, focal_prior, False, contact)
         f_end = float(np.exp(prob_k.globals_of(x_k)[0]))
@@ -321,6 +327,24 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
     report["focal_sweep"] = sweep
     cost, prob, x, ne = best
     kept2 = 0
+    if p.cross_seed and len(sweep) > 1:
+        # the best start's depth sides tried at the other starts' focal lengths (the whole scene scaled, so the
+        # image stays): the costs then compare focal lengths more than depth-side choices
+        f_best, nf_b, d_b, _, P_b = prob.solution(x)
+        cross = []
+        for f0, f_end, _ in sweep:
+            if abs(np.log(f_end / f_best)) < np.log(1.05):
+                continue
+            scale = f_end / f_best
+            gs = np.concatenate([[np.log(f_end), 0.0, 0.0, d_b * scale], prob.globals_of(x)[4:]])
+            prob_k, x_k, cost_k, ne_k, _ = solve_frames(points, weight, lengths, centre, fps, P_b * scale,
+                                                        (nf_b, d_b * scale), gs, p, p.max_iterations, False,
+                                                        focal_prior, False, contact)
+            cross.append([round(f_end, 1), round(float(np.exp(prob_k.globals_of(x_k)[0])), 1), round(cost_k, 1)])
+            if cost_k < cost:
+                cost, prob, x, ne = cost_k, prob_k, x_k, ne_k
+        report["focal_cross_seeded"] = cross
+        sweep = sweep + cross
     f, nf, d, offs, P = prob.solution(x)
     # uncertainty of the focal length (log f) from the normal equations, scaled by the fit's residual level
     terms = prob.term_costs(x)
@@ -351,6 +375,7 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
         reprojection_px_median=round(float(np.median(reproj[tracked])), 4) if tracked.any() else None,
         side_flips=int(kept1 + kept2), solve_seconds=round(time.perf_counter() - t0, 3),
         cost={k: round(v, 2) for k, v in terms.items()},
+        bone_lengths_m={k: round(v, 4) for k, v in lengths_to_body(prob.lengths_of(prob.globals_of(x))).items()},
     )
     # a second start ending at a clearly different focal length at a similar cost: the take cannot tell them apart
     rivals = [fe for f0, fe, c in sweep if abs(np.log(fe / f)) > np.log(1.1) and c < 1.05 * min(c2 for _, _, c2 in sweep)]

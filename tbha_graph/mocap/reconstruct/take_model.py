@@ -146,6 +146,7 @@ class Weights:
     sigma_hinge: float = 0.05    # wrong-way bending (unit vectors' dot product)
     sigma_floor: float = 0.01    # ankle below the floor / planted ankle off it, metres
     sigma_slide: float = 0.005   # planted ankle moving per frame, metres
+    sigma_length: float = 0.03  # free bone lengths around the body's (log, i.e. relative)
     sigma_pose: float = 0.5      # weak pose prior: head along the neck, pelvis facing as the thorax (unit vectors)
     contact_band: float = 0.03   # a planted ankle may rise this far above its standing height (heel and toe roll), metres
     sigma_offset: float = 0.03   # point offsets around their defaults, metres
@@ -174,10 +175,15 @@ class Layout:
 
     n_frames: int
     free_offsets: bool = True
+    free_lengths: bool = False
+
+    @property
+    def n_offsets(self) -> int:
+        return 2 * N_JOINTS if self.free_offsets else 0
 
     @property
     def n_globals(self) -> int:
-        return 1 + 3 + (2 * N_JOINTS if self.free_offsets else 0)
+        return 1 + 3 + self.n_offsets + (N_BONES if self.free_lengths else 0)
 
     @property
     def size(self) -> int:
@@ -203,11 +209,11 @@ class TakeProblem:
 
     def __init__(self, data: TakeData, ref: np.ndarray, n_ref: np.ndarray, weights: Weights,
                  offsets0: np.ndarray, fixed_globals: np.ndarray | None = None, free_offsets: bool = True,
-                 focal_prior: tuple[float, float] | None = None):
+                 focal_prior: tuple[float, float] | None = None, free_lengths: bool = False):
         self.d, self.w = data, weights
         self.n = data.points.shape[0]
         self.offsets0 = offsets0
-        self.layout = Layout(self.n, free_offsets)
+        self.layout = Layout(self.n, free_offsets, free_lengths)
         self.fixed_globals = None if fixed_globals is None else np.asarray(fixed_globals, dtype=np.float64)
         self.focal_prior = focal_prior  # (focal px, sigma of log f): a known focal length held (nearly) fixed
         self.n_glob = 0 if fixed_globals is not None else self.layout.n_globals
@@ -230,16 +236,24 @@ class TakeProblem:
     def offsets(self, g: np.ndarray) -> np.ndarray:
         return self.offsets0 + (g[4:4 + 2 * N_JOINTS].reshape(N_JOINTS, 2) if self.layout.free_offsets else 0.0)
 
+    def lengths_of(self, g: np.ndarray) -> np.ndarray:
+        """Bone lengths ``(16,)`` metres: the body's, times ``exp`` of their log-updates when they are free."""
+        if not self.layout.free_lengths:
+            return self.d.lengths
+        k = 4 + self.layout.n_offsets
+        return self.d.lengths * np.exp(np.r_[0.0, g[k:k + N_BONES]])
+
     def frames_of(self, x: np.ndarray) -> np.ndarray:
         return x[self.n_glob:].reshape(self.n, PER_FRAME)
 
-    def joints_from_frames(self, fr: np.ndarray) -> np.ndarray:
-        """Joint positions ``(n, 16, 3)`` camera frame from frame unknowns ``(n, PER_FRAME)``."""
+    def joints_from_frames(self, fr: np.ndarray, L: np.ndarray | None = None) -> np.ndarray:
+        """Joint positions ``(n, 16, 3)`` camera frame from frame unknowns ``(n, PER_FRAME)`` and bone lengths
+        ``L`` (the body's when not given)."""
         tangent = fr[:, 3:].reshape(-1, N_BONES, 2)
         dirs = unit(self.ref + tangent[..., 0:1] * self.e1 + tangent[..., 1:2] * self.e2)
         P = np.empty((fr.shape[0], N_JOINTS, 3))
         P[:, 0] = fr[:, :3]
-        L = self.d.lengths
+        L = self.d.lengths if L is None else L
         for j in ORDER:
             P[:, j] = P[:, PARENTS[j]] + L[j] * dirs[:, j - 1]
         return P
@@ -248,7 +262,7 @@ class TakeProblem:
         """``(focal px, floor normal (3,), floor offset, point offsets (16, 2), joints (n, 16, 3))``."""
         g = self.globals_of(x)
         nf, d = self.floor(g)
-        return float(np.exp(g[0])), nf, d, self.offsets(g), self.joints_from_frames(self.frames_of(x))
+        return float(np.exp(g[0])), nf, d, self.offsets(g), self.joints_from_frames(self.frames_of(x), self.lengths_of(g))
 
     # --- residuals ---------------------------------------------------------------------------
     def frame_terms(self, P: np.ndarray, g: np.ndarray) -> np.ndarray:
@@ -297,20 +311,22 @@ class TakeProblem:
         if self.n_glob:
             if self.layout.free_offsets:
                 out.append(((self.offsets(g) - self.offsets0) / self.w.sigma_offset).ravel())
+            if self.layout.free_lengths:
+                out.append(np.log(self.lengths_of(g)[1:] / self.d.lengths[1:]) / self.w.sigma_length)
             if self.focal_prior is not None:
                 out.append(np.array([(g[0] - np.log(self.focal_prior[0])) / self.focal_prior[1]]))
         return np.concatenate(out) if out else np.zeros(0)
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
         g = self.globals_of(x)
-        P = self.joints_from_frames(self.frames_of(x))
+        P = self.joints_from_frames(self.frames_of(x), self.lengths_of(g))
         acc, slide = self.coupled_terms(P, self.floor(g)[0])
         return np.concatenate([self.frame_terms(P, g).ravel(), acc.ravel(), slide.ravel(), self.global_terms(g)])
 
     def term_costs(self, x: np.ndarray) -> dict[str, float]:
         """Half sums of squares per kind of residual (for reports and tests)."""
         g = self.globals_of(x)
-        P = self.joints_from_frames(self.frames_of(x))
+        P = self.joints_from_frames(self.frames_of(x), self.lengths_of(g))
         F = self.frame_terms(P, g)
         acc, slide = self.coupled_terms(P, self.floor(g)[0])
         k = np.cumsum([0, N_JOINTS * 2, len(TORSO_PAIRS), len(HINGES), 2, 2, 6])
@@ -329,7 +345,7 @@ class TakeProblem:
         n, G, F = self.n, self.n_glob, N_FRAME_RES
         g = self.globals_of(x)
         fr = self.frames_of(x)
-        P0 = self.joints_from_frames(fr)
+        P0 = self.joints_from_frames(fr, self.lengths_of(g))
         R0 = self.frame_terms(P0, g)
         nf = self.floor(g)[0]
         dR = np.empty((n, F, PER_FRAME))
@@ -337,7 +353,7 @@ class TakeProblem:
         for i in range(PER_FRAME):
             fp = fr.copy()
             fp[:, i] += h
-            Pi = self.joints_from_frames(fp)
+            Pi = self.joints_from_frames(fp, self.lengths_of(g))
             dR[:, :, i] = (self.frame_terms(Pi, g) - R0) / h
             dP[:, :, i] = (Pi - P0).reshape(n, -1) / h
         rows, cols, vals = [], [], []
@@ -392,7 +408,7 @@ class TakeProblem:
         """Move the references to the current solution (tangents and the floor's update back to 0); returns
         the equivalent ``x``."""
         g = self.globals_of(x)
-        P = self.joints_from_frames(self.frames_of(x))
+        P = self.joints_from_frames(self.frames_of(x), self.lengths_of(g))
         nf, _ = self.floor(g)
         ref = bone_directions(P)
         self.set_refs(ref, nf)
@@ -480,7 +496,8 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray, h: float = 1e-6) -> tup
     n, G, F, m = prob.n, prob.n_glob, N_FRAME_RES, PER_FRAME
     g = prob.globals_of(x)
     fr = prob.frames_of(x)
-    P0 = prob.joints_from_frames(fr)
+    L = prob.lengths_of(g)
+    P0 = prob.joints_from_frames(fr, L)
     R0 = prob.frame_terms(P0, g)
     nf = prob.floor(g)[0]
     dR = np.empty((n, F, m))
@@ -488,7 +505,7 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray, h: float = 1e-6) -> tup
     for i in range(m):
         fp = fr.copy()
         fp[:, i] += h
-        Pi = prob.joints_from_frames(fp)
+        Pi = prob.joints_from_frames(fp, L)
         dR[:, :, i] = (prob.frame_terms(Pi, g) - R0) / h
         dP[:, :, i] = (Pi - P0).reshape(n, -1) / h
     diag = np.einsum("tri,trj->tij", dR, dR)
@@ -538,6 +555,11 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray, h: float = 1e-6) -> tup
         bg = Jg.T @ r_full
         Jf = Jg[: n * F].reshape(n, F, G)
         C = np.einsum("tri,trg->tig", dR, Jf)
+        if n > 2:  # accelerations depend on globals too when bone lengths are free
+            Ja = Jg[n * F: n * F + (n - 2) * N_JOINTS * 3].reshape(n - 2, N_JOINTS * 3, G)
+            s_acc = prob.d.fps ** 2 / prob.w.sigma_acc
+            for k, ck in enumerate((1.0, -2.0, 1.0)):
+                C[k:n - 2 + k] += ck * s_acc * np.einsum("tmi,tmg->tig", dP[k:n - 2 + k], Ja)
         base = n * F + max(n - 2, 0) * N_JOINTS * 3
         Js = Jg[base: base + 2 * n].reshape(n, 2, G)
         C += np.einsum("tai,tag->tig", d_now, Js)
@@ -708,14 +730,15 @@ def window_data(d: TakeData, lo: int, hi: int) -> TakeData:
 
 
 def refine_window(d: TakeData, w: Weights, offsets0: np.ndarray, g: np.ndarray, nf: np.ndarray, P: np.ndarray,
-                  lo: int, hi: int, iterations: int, free_offsets: bool) -> tuple[np.ndarray, float]:
+                  lo: int, hi: int, iterations: int, free_offsets: bool, free_lengths: bool = False) -> tuple[np.ndarray, float]:
     """Joints ``P[lo:hi]`` re-optimised with the globals ``g`` held; returns ``(joints (hi - lo, 16, 3), cost)``."""
     sub = P[lo:hi]
     ref = bone_directions(sub)
-    prob = TakeProblem(window_data(d, lo, hi), ref, nf, w, offsets0, fixed_globals=g, free_offsets=free_offsets)
+    prob = TakeProblem(window_data(d, lo, hi), ref, nf, w, offsets0, fixed_globals=g, free_offsets=free_offsets,
+                       free_lengths=free_lengths)
     x0 = pack_initial(sub, ref)
     x, cost, _, _ = levenberg_marquardt(prob, x0, iterations)
-    return prob.joints_from_frames(prob.frames_of(x)), cost
+    return prob.joints_from_frames(prob.frames_of(x), prob.lengths_of(g)), cost
 
 
 def window_cost(prob: TakeProblem, P: np.ndarray, g: np.ndarray, lo: int, hi: int) -> float:
@@ -743,10 +766,11 @@ def search_sides_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, iterations:
             lo, hi = max(seg[0] - margin, 0), min(seg[-1] + 1 + margin, n)
             if len(seg) < 2:
                 continue
-            trial = mirror(P, seg, group, prob.d.lengths)
+            trial = mirror(P, seg, group, prob.lengths_of(g))
             args = (prob.d, prob.w, prob.offsets0, g, nf)
-            _, c_cur = refine_window(*args, P, lo, hi, iterations, prob.layout.free_offsets)
-            new, c_new = refine_window(*args, trial, lo, hi, iterations, prob.layout.free_offsets)
+            flags = (prob.layout.free_offsets, prob.layout.free_lengths)
+            _, c_cur = refine_window(*args, P, lo, hi, iterations, *flags)
+            new, c_new = refine_window(*args, trial, lo, hi, iterations, *flags)
             if c_new < c_cur:
                 P[lo:hi] = new
                 kept += 1
