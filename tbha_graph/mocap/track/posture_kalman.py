@@ -36,6 +36,7 @@ import numpy as np
 from pydantic import Field
 from scipy.optimize import linear_sum_assignment
 
+from ...core.errors import NodeError
 from ...core.node import node
 from ...core.types import Json
 from ..color.model import as_color_model
@@ -43,6 +44,7 @@ from ..ports import TRACKS2D
 from ..segment.detections import DETECTIONS
 from ..skeleton import JOINT_INDEX, JOINT_NAMES, N_JOINTS, PARENTS
 from .body import TORSO_MIRRORS, BodyBounds
+from .tpose import find_tpose
 from .common import (DOUBT, StartParams, check_detections, class_joints, frame_candidates, run_passes, start_frame,
                      tracks_bundle)
 
@@ -92,6 +94,11 @@ class PostureKalmanParams(StartParams):
         12.0, gt=0, description="frames whose tracked patches are this far (median) from their predictions are "
                                 "reported doubtful", json_schema_extra={"unit": "px"},
     )
+    require_tpose: bool = Field(
+        False, description="the take must open with a T-pose facing the camera in its first tpose_seconds "
+                          "(tbha_graph.mocap.track.tpose); false: track without one (then give the camera and bones)"
+    )
+    tpose_seconds: float = Field(3.0, gt=0, description="where the opening T-pose is looked for", json_schema_extra={"unit": "s"})
 
 
 class KalmanTracker:
@@ -315,4 +322,19 @@ def posture_kalman(ctx, detections, colors) -> dict:
     points, tracked, doubt = run_passes(
         frame_candidates(centres, areas), len(centres), start, points0, lambda p0: KalmanTracker(p0, joints_of, p)
     )
+    if p.require_tpose:
+        check_opening_tpose(ctx, points, tracked, float(detections["fps"]), p.tpose_seconds)
     return {"tracks": tracks_bundle(points, tracked, detections, doubt)}
+
+
+def check_opening_tpose(ctx, points, tracked, fps: float, seconds: float) -> None:
+    """NodeError with the way out unless the tracks open with a T-pose (:func:`find_tpose`)."""
+    found = find_tpose(points, tracked, fps, seconds=seconds)
+    if found is None:
+        raise NodeError(
+            f"no T-pose facing the camera in the first {seconds:g} s of the take (arms level and out, legs straight): "
+            f"the patches' labels, the camera and the bones all start from it, so the result would be unreliable",
+            hint="start at the T-pose (--set decode.start=FRAME, plus truth.start=FRAME when scoring a render), or film "
+                 "one (docs/capture.md); to track a take that has none: --set track.require_tpose=false, and give the "
+                 "camera (--var focal_px=F) and the measured bones (--set body.path=my_body.yaml)")
+    ctx.log(f"T-pose at frames {found[0]}-{found[1]}")
