@@ -103,6 +103,10 @@ def run_files(folder: Path) -> set[str] | None:
     from its manifest; None when ``folder`` holds no manifest written by this project."""
     try:
         data = json.loads((Path(folder) / MANIFEST).read_text())
+    except FileNotFoundError:
+        if not Path(folder).is_dir():
+            raise  # the folder itself went away (another run replacing it): the caller looks again
+        return None
     except (OSError, ValueError, UnicodeDecodeError):
         return None
     if not isinstance(data, dict) or not isinstance(data.get("outputs"), dict) or not isinstance(data.get("nodes"), dict):
@@ -188,17 +192,39 @@ def _merge_in(staging: Path, out_dir: Path, old_own: set[str], new_files: list[s
 def check_out_dir(out_dir: Path, new_files: list[str] | None = None) -> tuple[str, set[str]]:
     """Decide how a run may be written to ``out_dir``: ("new", {}), ("swap", old files) or
     ("merge", old files). Raises TbhaError (before anything is written) when the folder is not empty and
-    not an earlier run, or when a new output would overwrite a file the earlier run did not write."""
-    out_dir = Path(out_dir)
+    not an earlier run, or when a new output would overwrite a file the earlier run did not write.
+    Another run replacing the same folder meanwhile (moving it aside while it is looked at) is waited out."""
+    refusals = 0
+    for attempt in range(60):
+        try:
+            return _check_out_dir(Path(out_dir), new_files)
+        except FileNotFoundError:
+            if attempt == 59:
+                raise
+        except TbhaError:
+            # a refusal is only believed when it holds on a second and third look: a folder caught in the
+            # middle of another run's replacement can look like anything for an instant
+            refusals += 1
+            if refusals >= 3:
+                raise
+        time.sleep(0.002 * (attempt % 10 + 1))
+    raise AssertionError("unreachable")
+
+
+def _check_out_dir(out_dir: Path, new_files: list[str] | None) -> tuple[str, set[str]]:
     if not out_dir.exists() and not out_dir.is_symlink():
         return "new", set()
     if not out_dir.is_dir():
+        if not out_dir.exists() and not out_dir.is_symlink():
+            raise FileNotFoundError(str(out_dir))  # moved away meanwhile by another run: look again
         raise TbhaError(f"the output folder {out_dir} exists and is not a folder; nothing was written",
                         hint="choose a new or empty folder with --out")
     present = _files_under(out_dir)
     if not present:
         return "new", set()
     own = run_files(out_dir)
+    if own is None and not out_dir.is_dir():
+        raise FileNotFoundError(str(out_dir))
     if own is None:
         shown = ", ".join(sorted(p.name for p in out_dir.iterdir())[:5])
         raise TbhaError(
