@@ -52,10 +52,18 @@ def problem(truth, P, uv, centre, L, weights: Weights, free_offsets=False, focal
     return prob, d
 
 
-@pytest.mark.parametrize("free_offsets,free_lengths", [(False, False), (True, False), (False, True)])
-def test_block_normal_equations_equal_the_dense_ones(truth, free_offsets, free_lengths):
+@pytest.mark.parametrize("free_offsets,free_lengths,split", [(False, False, False), (True, False, False),
+                                                             (False, True, False), (False, False, True)])
+def test_block_normal_equations_equal_the_dense_ones(truth, free_offsets, free_lengths, split):
     P, uv, centre, L = synthetic(truth, 9)
     prob, d = problem(truth, P, uv + 0.7, centre, L, Weights(), free_offsets=free_offsets, free_lengths=free_lengths)
+    if split:  # two independent windows in one problem (the side search's batches): nothing links frame 3 to 4
+        prob.d.breaks = np.r_[True, False, False, False, True, False, False, False, False]
+        acc, _ = prob.coupled_terms(P, prob.n_ref)
+        assert np.all(acc[2] == 0) and np.all(acc[3] == 0) and np.any(acc[4] != 0)
+        prob.d.contact[:] = True
+        assert not prob.slide_vectors(P, prob.n_ref)[1][4].any() and prob.slide_vectors(P, prob.n_ref)[1][5].all()
+        prob.d.contact[:] = contacts_from_image(uv, np.ones(uv.shape[:2], bool), float(truth["fps"]))
     lu = 0.02 * np.random.default_rng(2).standard_normal(15)
     x = np.concatenate([globals_vector(660.0, d, free_offsets, free_lengths, lu), pack_initial(P, prob.ref)])
     x[prob.n_glob:] += 0.01 * np.random.default_rng(1).standard_normal(x.size - prob.n_glob)

@@ -134,6 +134,17 @@ class TakeData:
     ankle_height: float
     contact: np.ndarray
     rest_pairs: np.ndarray = field(default=None)  # (len(TORSO_PAIRS),) rest distances, metres
+    #: ``(n,)`` bool or None: True where a new, independent segment starts (no acceleration or slide term
+    #: links frame t to the frames before it); lets many separate windows be solved as one problem
+    breaks: np.ndarray | None = None
+
+    def acc_mask(self) -> np.ndarray:
+        """``(n - 2,)`` 1.0 where the acceleration term of frames (t, t+1, t+2) lies inside one segment."""
+        n = self.points.shape[0]
+        if self.breaks is None or n < 3:
+            return np.ones(max(n - 2, 0))
+        b = np.asarray(self.breaks, dtype=bool)
+        return (~(b[1:-1] | b[2:])).astype(np.float64)
 
 
 @dataclass
@@ -298,10 +309,13 @@ class TakeProblem:
             s = P[1:, ANKLES] - P[:-1, ANKLES]
             step[1:] = s - (s @ nf)[..., None] * nf
             both[1:] = self.d.contact[1:] & self.d.contact[:-1]
+            if self.d.breaks is not None:
+                both &= ~np.asarray(self.d.breaks, dtype=bool)[:, None]
         return step, both
 
     def coupled_terms(self, P: np.ndarray, nf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         acc = (P[2:] - 2.0 * P[1:-1] + P[:-2]).reshape(max(self.n - 2, 0), -1) * (self.d.fps ** 2 / self.w.sigma_acc)
+        acc = acc * self.d.acc_mask()[:, None]
         step, both = self.slide_vectors(P, nf)
         slide = np.where(both, np.linalg.norm(step, axis=-1), 0.0) / self.w.sigma_slide
         return acc, slide
@@ -368,8 +382,9 @@ class TakeProblem:
             m = N_JOINTS * 3
             s = self.d.fps ** 2 / self.w.sigma_acc
             r_idx = base + np.arange(n - 2)[:, None, None] * m + np.arange(m)[None, :, None]
+            am = self.d.acc_mask()[:, None, None]
             for k, c in ((0, 1.0), (1, -2.0), (2, 1.0)):
-                blk = c * s * dP[k:n - 2 + k]
+                blk = am * c * s * dP[k:n - 2 + k]
                 rows.append(np.broadcast_to(r_idx, blk.shape).ravel())
                 cols.append(np.broadcast_to(col0[k:n - 2 + k], blk.shape).ravel())
                 vals.append(blk.ravel())
@@ -516,10 +531,11 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray, h: float = 1e-6) -> tup
     if n > 2:
         s = prob.d.fps ** 2 / prob.w.sigma_acc
         c = (1.0, -2.0, 1.0)
+        mask = prob.d.acc_mask()[:, None, None]
         for k in range(3):
             bf[k:n - 2 + k] += c[k] * s * np.einsum("tmi,tm->ti", dP[k:n - 2 + k], acc)
             for l in range(k, 3):
-                blk = c[k] * c[l] * s * s * np.einsum("tmi,tmj->tij", dP[k:n - 2 + k], dP[l:n - 2 + l])
+                blk = mask * c[k] * c[l] * s * s * np.einsum("tmi,tmj->tij", dP[k:n - 2 + k], dP[l:n - 2 + l])
                 if l == k:
                     diag[k:n - 2 + k] += blk
                 elif l - k == 1:
@@ -558,8 +574,9 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray, h: float = 1e-6) -> tup
         if n > 2:  # accelerations depend on globals too when bone lengths are free
             Ja = Jg[n * F: n * F + (n - 2) * N_JOINTS * 3].reshape(n - 2, N_JOINTS * 3, G)
             s_acc = prob.d.fps ** 2 / prob.w.sigma_acc
+            am = prob.d.acc_mask()[:, None, None]
             for k, ck in enumerate((1.0, -2.0, 1.0)):
-                C[k:n - 2 + k] += ck * s_acc * np.einsum("tmi,tmg->tig", dP[k:n - 2 + k], Ja)
+                C[k:n - 2 + k] += ck * s_acc * np.einsum("tmi,tmg->tig", dP[k:n - 2 + k], Ja * am)
         base = n * F + max(n - 2, 0) * N_JOINTS * 3
         Js = Jg[base: base + 2 * n].reshape(n, 2, G)
         C += np.einsum("tai,tag->tig", d_now, Js)
@@ -750,28 +767,51 @@ def window_cost(prob: TakeProblem, P: np.ndarray, g: np.ndarray, lo: int, hi: in
     return 0.5 * float(r @ r)
 
 
-def search_sides_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, iterations: int = 2, margin: int = 2,
+def search_sides_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, iterations: int = 3, margin: int = 2,
                     groups: tuple[tuple[int, ...], ...] = SIDE_GROUPS) -> tuple[np.ndarray, int]:
     """Discrete search over depth sides with local re-optimisation: for each group of bones
-    (:data:`SIDE_GROUPS`) and each out-of-plane run of frames (:func:`flip_segments`), the run is mirrored
-    (:func:`mirror`) and both the mirrored and the current run (with ``margin`` frames either side) are
-    re-optimised for ``iterations`` steps with the globals held; the mirror is kept when it ends cheaper.
+    (:data:`SIDE_GROUPS`) and each out-of-plane run of frames (:func:`flip_segments`) the run is mirrored
+    (:func:`mirror`); the current and the mirrored run (with ``margin`` frames either side) are re-optimised
+    for ``iterations`` steps with the globals held — all windows of a group at once, as independent segments
+    of one problem (``TakeData.breaks``) — and each mirror is kept when it ends cheaper than the current run.
     Returns the joints and the number of mirrors kept."""
     P = P.copy()
     nf = prob.floor(g)[0]
-    kept = 0
+    L = prob.lengths_of(g)
+    d = prob.d
     n = P.shape[0]
+    kept = 0
     for group in groups:
+        wins = []
         for seg in flip_segments(P, group[0]):
-            lo, hi = max(seg[0] - margin, 0), min(seg[-1] + 1 + margin, n)
             if len(seg) < 2:
                 continue
-            trial = mirror(P, seg, group, prob.lengths_of(g))
-            args = (prob.d, prob.w, prob.offsets0, g, nf)
-            flags = (prob.layout.free_offsets, prob.layout.free_lengths)
-            _, c_cur = refine_window(*args, P, lo, hi, iterations, *flags)
-            new, c_new = refine_window(*args, trial, lo, hi, iterations, *flags)
+            wins.append((max(seg[0] - margin, 0), min(seg[-1] + 1 + margin, n), seg))
+        if not wins:
+            continue
+        parts, idx, breaks = [], [], []
+        for lo, hi, seg in wins:
+            trial = mirror(P, seg, group, L)
+            for Q in (P, trial):
+                parts.append(Q[lo:hi])
+                idx.append(np.arange(lo, hi))
+                breaks.append(np.r_[True, np.zeros(hi - lo - 1, dtype=bool)])
+        rows = np.concatenate(idx)
+        Pst = np.concatenate(parts)
+        data = TakeData(d.points[rows], d.weight[rows], d.lengths, d.centre, d.fps, d.ankle_height, d.contact[rows],
+                        d.rest_pairs, breaks=np.concatenate(breaks))
+        ref = bone_directions(Pst)
+        wp = TakeProblem(data, ref, nf, prob.w, prob.offsets0, fixed_globals=g, free_offsets=prob.layout.free_offsets,
+                         free_lengths=prob.layout.free_lengths)
+        x, _, _, _ = levenberg_marquardt(wp, pack_initial(Pst, ref), iterations)
+        Pout = wp.joints_from_frames(wp.frames_of(x), L)
+        cost = joints_cost(wp, Pout, g)
+        start = 0
+        for lo, hi, seg in wins:
+            m = hi - lo
+            c_cur, c_new = cost[start:start + m].sum(), cost[start + m:start + 2 * m].sum()
             if c_new < c_cur:
-                P[lo:hi] = new
+                P[lo:hi] = Pout[start + m:start + 2 * m]
                 kept += 1
+            start += 2 * m
     return P, kept
