@@ -8,24 +8,30 @@ This node finds, for the whole take at once (model and residuals: :mod:`.take_mo
   fixed; a fronto-parallel T-pose alone gives only focal ÷ distance;
 * the floor (its normal and height in the camera frame), hence the camera's height and tilt;
 * per frame the root position and every bone's direction (bone lengths exact by construction);
-* where each tracked point sits on the body (its offset from the joint centre, around suit defaults).
+* optionally where each tracked point sits on the body and the bone lengths, around their defaults
+  (``free_offsets``, ``free_lengths``; off by default: measured no better on the sample).
 
-Method. ``scipy.optimize.least_squares`` (trf, sparse ``jac_sparsity``, soft-L1 loss) over residuals
-divided by their standard deviations: reprojection of every tracked point, joint-acceleration smoothness,
-near-rigid torso, knee/elbow hinge limits, floor contact (planted ankles at rest height and still, no ankle
-below the floor), a weak prior on the point offsets.
+Method. Levenberg–Marquardt on the whole take's block normal equations (:func:`.take_model.normal_equations`:
+frame blocks banded, globals by a Schur complement, so each step costs time linear in the frames) over
+residuals divided by their standard deviations: robust (soft-L1) reprojection of every tracked point,
+joint-acceleration smoothness, near-rigid torso, knee/elbow hinge limits, floor contact (planted ankles —
+found from the image, where a planted ankle stands still — at rest height within a 3 cm roll band and not
+sliding; no ankle below the floor), a weak pose prior (head along the neck, pelvis facing as the thorax).
 
-1. **Focal sweep.** For each starting focal length (``focal_grid`` × image width) the seed's geometry gives a
-   first skeleton: the T-pose torso by PnP, then the torso pose per frame and the limb depths with depth
-   sides chosen over time (:func:`.temporal_ray_sphere.solve_temporal`). A short solve of a frame subsample
-   with the focal length free scores each start; the best is kept.
-2. **Whole take.** The globals (focal, floor, offsets) are solved on a frame subsample spread over the
-   whole take, then held fixed while the frames are solved in overlapping windows (``window`` frames),
-   so cost grows linearly with the take and memory stays flat.
-3. **Depth sides.** A limb can lie in front of or behind its parent with the same image. Each limb's side
-   is re-decided over time segments by trying the mirrored segment and keeping it when the total cost
-   (hinges, floor, smoothness, reprojection) falls.
-4. **World frame.** y up = the floor normal, origin on the floor below the hips on the first frame, z the
+1. **Starts.** For each starting focal length (``focal_grid`` × image width, a weak log-normal prior
+   around ``focal_prior_width`` × width), or the given ``focal_px``: a first skeleton from the seed's
+   geometry (T-pose camera by PnP, the torso's *points* fitted by PnP per frame, limbs by ray-sphere with
+   depth sides chosen over time, :func:`.temporal_ray_sphere.solve_temporal`).
+2. **Subsample.** On ``calib_frames`` frames spread over the take: LM, the depth-side search, LM again.
+3. **Depth sides.** A limb can lie in front of or behind its parent with the same image. For each group of
+   bones (pelvis, thorax, each limb bone, head) and each run of frames where the bone points out of the
+   image plane, the mirrored run and the current one are re-optimised together (all windows of a group in
+   one problem) and the mirror kept where it ends cheaper (:func:`.take_model.search_sides_lm`).
+4. **Whole take.** Every frame from the subsample's solution (interpolated), LM with focal and floor free.
+   The start with the lowest whole-take cost wins; its depth sides are then re-solved at the other starts'
+   focal lengths (``cross_seed``). Another start within 5 % of the best cost at a clearly different focal
+   length is reported as a warning: the take cannot tell them apart.
+5. **World frame.** y up = the floor normal, origin on the floor below the hips on the first frame, z the
    actor's forward on the first frame made horizontal (the actor faces +z in the T-pose).
 
 Outputs: ``motion`` (world, metres), ``camera`` (K, R, t in that world), ``sides`` (depth side per frame and
@@ -62,8 +68,6 @@ class SolveTakeParams(BaseModel):
     focal_prior_width: float = Field(1.2, gt=0, description="centre of the weak focal-length prior, as a multiple of the image width")
     focal_prior_log_sd: float = Field(0.35, gt=0, description="standard deviation of log(focal) in that prior (0.35: x/÷ 1.4)")
     tpose_frames: int = Field(10, ge=1, description="opening T-pose frames used to place the first skeleton")
-    window: int = Field(150, ge=20, description="frames per solving window (cost grows linearly with the take)")
-    overlap: int = Field(30, ge=4, description="frames shared by consecutive windows (blended)")
     calib_frames: int = Field(70, ge=20, description="frames (spread over the take) used to solve focal, floor and point offsets")
     max_iterations: int = Field(12, ge=1, description="Levenberg-Marquardt iterations on the whole take")
     calib_iterations: int = Field(10, ge=1, description="Levenberg-Marquardt iterations per start on the frame subsample")

@@ -171,15 +171,6 @@ def robust(r: np.ndarray, c: float) -> np.ndarray:
     return np.sign(r) * c * np.sqrt(2.0 * (np.sqrt(1.0 + z) - 1.0))
 
 
-def robust_slope(r: np.ndarray, c: float) -> np.ndarray:
-    """Derivative of :func:`robust` with respect to ``r`` (1 at 0)."""
-    z = (r / c) ** 2
-    rho = 2.0 * (np.sqrt(1.0 + z) - 1.0)
-    small = z < 1e-8
-    safe = np.where(small, 1.0, np.sqrt(np.where(small, 1.0, rho / np.maximum(z, 1e-300))))
-    return np.where(small, 1.0, 1.0 / (safe * np.sqrt(1.0 + z)))
-
-
 @dataclass
 class Layout:
     """Where each unknown lives in ``x``; which globals are free."""
@@ -349,75 +340,6 @@ class TakeProblem:
         out.update(acceleration=0.5 * float(np.sum(acc ** 2)), slide=0.5 * float(np.sum(slide ** 2)),
                    priors=0.5 * float(np.sum(self.global_terms(g) ** 2)))
         return out
-
-    # --- Jacobian ----------------------------------------------------------------------------
-    def jacobian(self, x: np.ndarray, h: float = 1e-6) -> sp.csr_matrix:
-        """Sparse Jacobian of :meth:`residuals`. Frame unknowns: one forward difference per unknown index,
-        perturbed in every frame at once (a frame's own residuals depend on its own unknowns only);
-        accelerations and slides by the chain rule through the joints' differences; globals: one forward
-        difference each."""
-        n, G, F = self.n, self.n_glob, N_FRAME_RES
-        g = self.globals_of(x)
-        fr = self.frames_of(x)
-        P0 = self.joints_from_frames(fr, self.lengths_of(g))
-        R0 = self.frame_terms(P0, g)
-        nf = self.floor(g)[0]
-        dR = np.empty((n, F, PER_FRAME))
-        dP = np.empty((n, N_JOINTS * 3, PER_FRAME))
-        for i in range(PER_FRAME):
-            fp = fr.copy()
-            fp[:, i] += h
-            Pi = self.joints_from_frames(fp, self.lengths_of(g))
-            dR[:, :, i] = (self.frame_terms(Pi, g) - R0) / h
-            dP[:, :, i] = (Pi - P0).reshape(n, -1) / h
-        rows, cols, vals = [], [], []
-        col0 = G + np.arange(n)[:, None, None] * PER_FRAME + np.arange(PER_FRAME)[None, None, :]
-        # per-frame block
-        r_idx = np.arange(n)[:, None, None] * F + np.arange(F)[None, :, None]
-        rows.append(np.broadcast_to(r_idx, dR.shape).ravel()); cols.append(np.broadcast_to(col0, dR.shape).ravel())
-        vals.append(dR.ravel())
-        base = n * F
-        # accelerations
-        if n > 2:
-            m = N_JOINTS * 3
-            s = self.d.fps ** 2 / self.w.sigma_acc
-            r_idx = base + np.arange(n - 2)[:, None, None] * m + np.arange(m)[None, :, None]
-            am = self.d.acc_mask()[:, None, None]
-            for k, c in ((0, 1.0), (1, -2.0), (2, 1.0)):
-                blk = am * c * s * dP[k:n - 2 + k]
-                rows.append(np.broadcast_to(r_idx, blk.shape).ravel())
-                cols.append(np.broadcast_to(col0[k:n - 2 + k], blk.shape).ravel())
-                vals.append(blk.ravel())
-            base += (n - 2) * m
-        # slides
-        step, both = self.slide_vectors(P0, nf)
-        norm = np.linalg.norm(step, axis=-1, keepdims=True)
-        u = np.where(both[..., None], step / np.maximum(norm, 1e-9), 0.0)  # (n, 2, 3)
-        u = u - (u @ nf)[..., None] * nf  # the horizontal projection's transpose applied to u
-        dPa = dP.reshape(n, N_JOINTS, 3, PER_FRAME)[:, ANKLES]  # (n, 2, 3, PER_FRAME)
-        d_now = np.einsum("tac,tacp->tap", u, dPa) / self.w.sigma_slide
-        d_prev = np.zeros_like(d_now)
-        d_prev[1:] = -np.einsum("tac,tacp->tap", u[1:], dPa[:-1]) / self.w.sigma_slide
-        r_idx = base + np.arange(n)[:, None, None] * 2 + np.arange(2)[None, :, None]
-        rows.append(np.broadcast_to(r_idx, d_now.shape).ravel()); cols.append(np.broadcast_to(col0, d_now.shape).ravel())
-        vals.append(d_now.ravel())
-        if n > 1:
-            rows.append(np.broadcast_to(r_idx[1:], d_prev[1:].shape).ravel())
-            cols.append(np.broadcast_to(col0[:-1], d_prev[1:].shape).ravel())
-            vals.append(d_prev[1:].ravel())
-        base += n * 2
-        n_rows = base + self.global_terms(g).size
-        # globals
-        if G:
-            r_full = self.residuals(x)
-            for i in range(G):
-                xp = x.copy()
-                xp[i] += h
-                col = (self.residuals(xp) - r_full) / h
-                nz = np.flatnonzero(col)
-                rows.append(nz); cols.append(np.full(nz.size, i)); vals.append(col[nz])
-        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                             shape=(n_rows, G + n * PER_FRAME))
 
     def recentre(self, x: np.ndarray) -> np.ndarray:
         """Move the references to the current solution (tangents and the floor's update back to 0); returns
@@ -712,59 +634,6 @@ def mirror(P: np.ndarray, frames: np.ndarray, group: tuple[int, ...], lengths: n
     below = [k for j in group for k in descendants(j)]
     reexpand(trial, P, frames, below, lengths)
     return trial
-
-
-def search_sides(prob: TakeProblem, P: np.ndarray, g: np.ndarray, rounds: int = 2,
-                 groups: tuple[tuple[int, ...], ...] = SIDE_GROUPS) -> tuple[np.ndarray, int]:
-    """Greedy discrete search over depth sides: for each group of bones (:data:`SIDE_GROUPS`) and each
-    out-of-plane run of frames (:func:`flip_segments` of the group's first bone), mirror the bones to the other
-    side of their parents along the camera rays (:func:`mirror`) and keep the mirror when the cost of the
-    frames around the run falls. Returns the joints and the number of mirrors kept."""
-    P = P.copy()
-    kept = 0
-    lengths = prob.d.lengths
-    for _ in range(rounds):
-        changed = False
-        base = joints_cost(prob, P, g)
-        for group in groups:
-            for seg in flip_segments(P, group[0]):
-                lo, hi = max(seg[0] - 2, 0), min(seg[-1] + 3, P.shape[0])
-                trial = mirror(P, seg, group, lengths)
-                new = joints_cost(prob, trial, g)
-                if new[lo:hi].sum() < base[lo:hi].sum() - 1e-6:
-                    P, base = trial, new
-                    kept += 1
-                    changed = True
-        if not changed:
-            break
-    return P, kept
-
-
-def window_data(d: TakeData, lo: int, hi: int) -> TakeData:
-    """The frames ``lo:hi`` of a take's data."""
-    return TakeData(d.points[lo:hi], d.weight[lo:hi], d.lengths, d.centre, d.fps, d.ankle_height, d.contact[lo:hi],
-                    d.rest_pairs)
-
-
-def refine_window(d: TakeData, w: Weights, offsets0: np.ndarray, g: np.ndarray, nf: np.ndarray, P: np.ndarray,
-                  lo: int, hi: int, iterations: int, free_offsets: bool, free_lengths: bool = False) -> tuple[np.ndarray, float]:
-    """Joints ``P[lo:hi]`` re-optimised with the globals ``g`` held; returns ``(joints (hi - lo, 16, 3), cost)``."""
-    sub = P[lo:hi]
-    ref = bone_directions(sub)
-    prob = TakeProblem(window_data(d, lo, hi), ref, nf, w, offsets0, fixed_globals=g, free_offsets=free_offsets,
-                       free_lengths=free_lengths)
-    x0 = pack_initial(sub, ref)
-    x, cost, _, _ = levenberg_marquardt(prob, x0, iterations)
-    return prob.joints_from_frames(prob.frames_of(x), prob.lengths_of(g)), cost
-
-
-def window_cost(prob: TakeProblem, P: np.ndarray, g: np.ndarray, lo: int, hi: int) -> float:
-    """Cost of frames ``lo:hi`` of ``P`` alone (their own residuals, accelerations and slides inside the range)."""
-    sub = P[lo:hi]
-    wp = TakeProblem(window_data(prob.d, lo, hi), bone_directions(sub), prob.floor(g)[0], prob.w, prob.offsets0,
-                     fixed_globals=g, free_offsets=prob.layout.free_offsets)
-    r = wp.residuals(pack_initial(sub, wp.ref))
-    return 0.5 * float(r @ r)
 
 
 def search_sides_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, iterations: int = 3, margin: int = 2,
