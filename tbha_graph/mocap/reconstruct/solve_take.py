@@ -43,6 +43,8 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from typing import Literal
+
 from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.errors import NodeError
@@ -74,6 +76,8 @@ class SolveTakeParams(BaseModel):
     sigma_px: float = Field(1.0, gt=0, description="2D tracking noise", json_schema_extra={"unit": "px"})
     sigma_acc: float = Field(30.0, gt=0, description="typical joint acceleration (smoothness prior)", json_schema_extra={"unit": "m/s^2"})
     ankle_height: float = Field(DEFAULT_ANKLE_HEIGHT, ge=0, le=0.3, description="ankle joint height above the floor when standing", json_schema_extra={"unit": "m"})
+    points: Literal["suit", "joints"] = Field("suit", description="what the tracks mark: 'suit' patches on the body "
+                                              "surface (modelled off the joint centres) or 'joints' (detector keypoints)")
     free_offsets: bool = Field(False, description="estimate where each tracked point sits on the body (else the suit defaults)")
     free_lengths: bool = Field(False, description="refine the bone lengths from the take around the body's (3 % prior); measured on the sample: no better, so off")
     side_search: bool = Field(True, description="re-decide limbs' depth sides over time segments by total cost")
@@ -202,7 +206,8 @@ def first_skeleton(points, tracked, lengths, f, centre, width, height, fps, p: S
     """A first skeleton for focal ``f``: camera by PnP of the T-pose, torso by PnP of its points per frame, limbs
     by ray-sphere with depth sides chosen over time. Returns ``(joints (n, 16, 3) camera frame, camera)``."""
     cam = tpose_camera(points, tracked, lengths, f, centre, width, height, p.tpose_frames, p.ankle_height)
-    torso = torso_track(cam, points, lengths, DEFAULT_POINT_OFFSETS, fps, p.ankle_height)
+    offsets = DEFAULT_POINT_OFFSETS if p.points == "suit" else np.zeros_like(DEFAULT_POINT_OFFSETS)
+    torso = torso_track(cam, points, lengths, offsets, fps, p.ankle_height)
     P, _, _ = solve_temporal(points, cam, lengths, fps, TemporalRaySphereParams(), torso=torso)
     return P, cam
 
@@ -221,7 +226,8 @@ def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: Solve
     data = TakeData(points, weight, lengths, centre, fps, p.ankle_height, contact,
                     rest_pair_distances(lengths, p.ankle_height))
     w = Weights(sigma_px=p.sigma_px, sigma_acc=p.sigma_acc)
-    return TakeProblem(data, bone_directions(P), nf, w, DEFAULT_POINT_OFFSETS.copy(), free_offsets=free_offsets,
+    offsets = DEFAULT_POINT_OFFSETS.copy() if p.points == "suit" else np.zeros_like(DEFAULT_POINT_OFFSETS)
+    return TakeProblem(data, bone_directions(P), nf, w, offsets, free_offsets=free_offsets,
                        focal_prior=focal_prior, free_lengths=p.free_lengths), d
 
 
