@@ -24,12 +24,12 @@ from scipy.spatial.transform import Rotation
 
 from tbha_graph.mocap import skeleton as sk
 from tbha_graph.mocap.filter.bone_length import constant_bone_lengths
-from tbha_graph.mocap.filter.butterworth import butterworth_lowpass
+from tbha_graph.mocap.lowpass import butterworth_lowpass
 from tbha_graph.mocap.filter.one_euro import one_euro_filter
 from tbha_graph.mocap.io.skeleton_map import motion16_from_bvh, rotations16_from_bvh
-from tbha_graph.mocap.kinematics import forward_kinematics, quat_inv, quat_mul
+from tbha_graph.mocap.kinematics import forward_kinematics
 from tbha_graph.mocap.rotations.kabsch import KabschParams, kabsch_rotations
-from tbha_graph.mocap.rotations.quat import angle_of
+from tbha_graph.mocap.quat import angle_of, quat_inv, quat_mul
 from tbha_graph.mocap.rotations.quaternion import QuaternionParams, quaternion_rotations
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "mocap" / "cmu"

@@ -9,7 +9,8 @@ import json
 import threading
 from pathlib import Path
 
-from .types import atomic_write_bytes, hash_file
+from .atomic import atomic_write_bytes
+from .types import hash_file
 
 _lock = threading.Lock()
 _memo: dict[str, list] = {}

@@ -215,7 +215,7 @@ def write_tables(rows: list[dict[str, Any]], out_dir: Path, stem: str = "results
     w.writeheader()
     for r in rows:
         w.writerow({c: _fmt(r.get(c)) for c in cols})
-    from .types import atomic_write_bytes
+    from .atomic import atomic_write_bytes
 
     atomic_write_bytes(out_dir / f"{stem}.csv", buf.getvalue().encode())
     atomic_write_bytes(out_dir / f"{stem}.md", to_markdown(rows, first).encode())

@@ -6,12 +6,13 @@ are constructed: nothing in a pipeline file is ever evaluated as code.
 """
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from .errors import Location, PipelineError
+from .errors import Location, PipelineError, TbhaError
 
 
 class LocatedDict(dict):
@@ -93,6 +94,33 @@ def load_yaml(path: str | Path, text: str | None = None) -> tuple[Any, list[Pipe
     if nesting_depth(data) > MAX_DEPTH:
         return None, [_too_deep(path)]
     return data, errors
+
+
+def read_data_file(path: str | Path, what: str, error: type[TbhaError] = TbhaError) -> Any:
+    """The content of a small data file (camera, bone lengths, suit, mapping): JSON when the suffix is
+    ``.json``, else YAML loaded safely by :func:`load_yaml` (duplicate keys and bad bytes are errors).
+
+    Raises ``error`` (a :class:`TbhaError` class, e.g. ``NodeError``) naming ``what``, the file and the
+    line (and column) of the first problem: not UTF-8, a syntax error, a duplicate key.
+    """
+    path = Path(path)
+    if path.suffix.lower() != ".json":
+        data, problems = load_yaml(path)
+        if problems:
+            p = problems[0]
+            raise error(f"{what}: {p.message}", location=p.location or Location(str(path)), hint=p.hint)
+        return data
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
+        raise error(f"{what}: not UTF-8 text (byte {e.start}: {e.object[e.start]:#04x})", location=Location(str(path)),
+                    hint="save the file as UTF-8") from None
+    except OSError as e:
+        raise error(f"{what}: cannot be read: {e.strerror or e}", location=Location(str(path))) from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as e:
+        raise error(f"invalid JSON ({what}): {e.msg}", location=Location(str(path), e.lineno, e.colno)) from None
 
 
 MAX_DEPTH = 64  # nesting levels of lists/mappings; deeper files are refused (no real file comes close)

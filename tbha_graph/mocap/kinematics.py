@@ -1,77 +1,13 @@
-"""Forward kinematics and small quaternion helpers, vectorised over frames.
+"""Forward kinematics, vectorised over frames (BVH semantics).
 
-Quaternions are stored in scipy's scalar-last order ``(x, y, z, w)`` as float64 arrays of shape
-``(..., 4)``; every function broadcasts over the leading axes. Rotations act on column vectors
-(``q`` applied to ``v`` is ``R(q) @ v``) and ``quat_mul(a, b)`` is the rotation "first ``b``, then
-``a``", i.e. ``R(a) @ R(b)``, matching ``scipy.spatial.transform.Rotation`` (``Ra * Rb``).
-
-This module is self-contained (numpy only): plain numpy quaternion arithmetic is several times
-faster than building scipy ``Rotation`` objects for small per-joint batches.
+Quaternions are scipy-ordered ``(x, y, z, w)`` ``(..., 4)`` float64; their arithmetic is
+:mod:`tbha_graph.mocap.quat` (the project's one quaternion module).
 """
 from __future__ import annotations
 
 import numpy as np
 
-
-def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product ``a * b`` of quaternions ``(..., 4)`` xyzw; broadcasts; returns ``(..., 4)``."""
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
-    bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
-    return np.stack(
-        (
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-            aw * bw - ax * bx - ay * by - az * bz,
-        ),
-        axis=-1,
-    )
-
-
-def quat_inv(q: np.ndarray) -> np.ndarray:
-    """Inverse of quaternions ``(..., 4)`` xyzw (conjugate divided by the squared norm)."""
-    q = np.asarray(q, dtype=np.float64)
-    conj = q * np.array([-1.0, -1.0, -1.0, 1.0])
-    return conj / np.sum(q * q, axis=-1, keepdims=True)
-
-
-def quat_apply(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate vectors ``v`` ``(..., 3)`` by unit quaternions ``q`` ``(..., 4)`` xyzw; broadcasts.
-
-    Uses ``v' = v + 2w (u x v) + 2 u x (u x v)`` with ``u`` the vector part (no matrices built).
-    """
-    q = np.asarray(q, dtype=np.float64)
-    v = np.asarray(v, dtype=np.float64)
-    u = q[..., :3]
-    w = q[..., 3:4]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
-
-
-def quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)`` xyzw."""
-    q = np.asarray(q, dtype=np.float64)
-    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    xx, yy, zz = x * x, y * y, z * z
-    xy, xz, yz = x * y, x * z, y * z
-    wx, wy, wz = w * x, w * y, w * z
-    m = np.stack(
-        (
-            1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy),
-            2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx),
-            2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy),
-        ),
-        axis=-1,
-    )
-    return m.reshape(q.shape[:-1] + (3, 3))
-
-
-def quat_normalize(q: np.ndarray) -> np.ndarray:
-    """Quaternions ``(..., 4)`` scaled to unit norm."""
-    q = np.asarray(q, dtype=np.float64)
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+from .quat import quat_apply, quat_mul
 
 
 def validate_parents(parents: np.ndarray) -> np.ndarray:

@@ -161,15 +161,12 @@ def load_suit(path: str | Path | None = None) -> SuitSpec:
     Raises :class:`tbha_graph.core.errors.NodeError` naming the file and the problem.
     """
     from ..core.errors import NodeError
-    from ..core.yamlfile import load_yaml
+    from ..core.yamlfile import read_data_file
 
     path = DEFAULT_SUIT_PATH if path is None else Path(path)
     if not path.is_file():
         raise NodeError(f"suit spec {path} does not exist", hint="give the path of a suit YAML; see tbha_graph/mocap/suit_default.yaml")
-    data, problems = load_yaml(path)  # safe loading; reports bad bytes, syntax errors and duplicate keys with their line
-    if problems:
-        raise NodeError(f"suit spec {path} is not valid: {problems[0].message}", location=problems[0].location,
-                        hint=problems[0].hint) from None
+    data = read_data_file(path, "suit spec", NodeError)  # safe loading; bad bytes, syntax errors, duplicate keys with their line
     try:
         return SuitSpec.model_validate(data)
     except Exception as e:

@@ -32,7 +32,8 @@ from tbha_graph.core.testing import run_node
 from tbha_graph.mocap.export.bvh import export_bvh, joint_names_for
 from tbha_graph.mocap.export.presets import get_preset
 from tbha_graph.mocap.io.skeleton_map import rotations16_from_bvh
-from tbha_graph.mocap.kinematics import forward_kinematics, quat_apply
+from tbha_graph.mocap.kinematics import forward_kinematics
+from tbha_graph.mocap.quat import quat_apply
 from tbha_graph.mocap.skeleton import JOINT_NAMES, PARENTS
 
 REPO = Path(__file__).resolve().parents[2]

@@ -5,14 +5,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from tbha_graph.mocap.kinematics import (
-    forward_kinematics,
-    quat_apply,
-    quat_inv,
-    quat_mul,
-    quat_to_matrix,
-    validate_parents,
-)
+from tbha_graph.mocap.kinematics import forward_kinematics, validate_parents
+from tbha_graph.mocap.quat import quat_apply, quat_inv, quat_mul, quat_to_matrix
 
 
 def _same_rotation(q1: np.ndarray, q2: np.ndarray, tol: float = 1e-12) -> bool:

@@ -15,8 +15,9 @@ from tbha_graph.core.testing import run_node
 from tbha_graph.mocap import skeleton as sk
 from tbha_graph.mocap.filter.bone_length import constant_bone_lengths
 from tbha_graph.mocap.io.skeleton_map import motion16_from_bvh, rotations16_from_bvh
-from tbha_graph.mocap.kinematics import forward_kinematics, quat_apply, quat_inv, quat_mul
-from tbha_graph.mocap.rotations import quat as Q
+from tbha_graph.mocap.kinematics import forward_kinematics
+from tbha_graph.mocap.quat import quat_apply, quat_inv, quat_mul
+from tbha_graph.mocap import quat as Q
 from tbha_graph.mocap.rotations.kabsch import kabsch_node
 from tbha_graph.mocap.rotations.quaternion import quaternion
 from tbha_graph.mocap.rotations.rest import HINGES, TORSO

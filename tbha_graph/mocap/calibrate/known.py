@@ -11,9 +11,6 @@ Conventions are those of :mod:`tbha_graph.mocap.camera` (Xc = R Xw + t, camera x
 """
 from __future__ import annotations
 
-import json
-import zipfile
-import zlib
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +18,9 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.errors import NodeError
 from ...core.node import InputPath, node
+from ...core.npzfile import read_npz
 from ...core.types import Json
+from ...core.yamlfile import read_data_file
 from ..camera import Camera
 from ..ports import CAMERA
 
@@ -35,10 +34,6 @@ class KnownParams(BaseModel):
     rotation_tolerance: float = Field(1e-4, gt=0, le=0.1, description="largest allowed |R R^T - I| entry")
 
 
-#: what reading a damaged .npz raises (zip structure, deflate stream, .npy header, truncation)
-_DAMAGED_NPZ = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError, RuntimeError)
-
-
 def _numbers_only(x) -> bool:
     """A number or nested lists of numbers, written as numbers (not true/false, not "1.5")."""
     if isinstance(x, list):
@@ -49,33 +44,10 @@ def _numbers_only(x) -> bool:
 def _read_mapping(path: Path) -> dict:
     suffix = path.suffix.lower()
     if suffix == ".npz":
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                damaged = z.zip.testzip()  # numpy alone skips the CRC check of members it reads partly
-                if damaged is not None:
-                    raise NodeError(f"{path}: {damaged} is damaged (its CRC-32 does not match)")
-                return {k: z[k] for k in z.files if k in REQUIRED + ("dist",)}
-        except _DAMAGED_NPZ as e:
-            raise NodeError(f"{path}: cannot read as .npz: {e}") from None
-    if suffix in (".yaml", ".yml"):
-        from ...core.yamlfile import load_yaml
-
-        data, problems = load_yaml(path)  # safe loading; bad bytes, syntax errors, duplicate keys with their line
-        if problems:
-            raise NodeError(f"{path}: invalid YAML: {problems[0].message}", location=problems[0].location)
-        return _camera_mapping(path, data)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as e:
-        raise NodeError(f"{path}: not UTF-8 text (byte {e.start}: {e.object[e.start]:#04x})") from None
-    if suffix == ".json":
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as e:
-            raise NodeError(f"{path}:{e.lineno}:{e.colno}: invalid JSON: {e.msg}") from None
-    else:
+        return read_npz(path, "camera file", keys=REQUIRED + ("dist",))  # no pickle, every member's CRC checked
+    if suffix not in (".yaml", ".yml", ".json"):
         raise NodeError(f"{path}: unknown camera file type {suffix!r}", hint="use .yaml, .yml, .json or .npz")
-    return _camera_mapping(path, data)
+    return _camera_mapping(path, read_data_file(path, "camera file", NodeError))  # safe YAML or JSON, errors with line
 
 
 def _camera_mapping(path: Path, data) -> dict:

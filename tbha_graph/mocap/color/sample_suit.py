@@ -13,13 +13,13 @@ It never overwrites an existing file (``--force`` to allow it).
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
 import numpy as np
 import yaml
 
+from ...core.atomic import atomic_path
 from ...core.errors import NodeFailed, TbhaError
 from ..skeleton import JOINT_NAMES
 from ..suit import DEFAULT_SUIT_PATH, load_suit
@@ -93,14 +93,9 @@ def write_suit(nominal_path: Path, measured: dict[str, tuple[str, int]], out: Pa
             f"# nominal suit: {nominal_path}; nominal colours: "
             + ", ".join(f"{k} {v}" for k, v in suit.colors.items()) + "\n")
     text = head + yaml.safe_dump(data, sort_keys=False)
-    tmp = out.with_name(f".{out.name}.part-{os.getpid()}")
-    tmp.write_text(text)
-    try:
-        load_suit(tmp)  # the written file must be a valid suit
-        os.replace(tmp, out)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    with atomic_path(out) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+        load_suit(tmp)  # the written file must be a valid suit (else nothing is written)
     return out
 
 

@@ -15,6 +15,8 @@ import warnings
 
 import numpy as np
 
+from ..rigid import procrustes
+
 from ..skeleton import PARENTS
 
 ALIGNMENTS = ("similarity", "rigid", "none")
@@ -71,32 +73,15 @@ def similarity_fit(src: np.ndarray, dst: np.ndarray, *, scale: bool = True) -> t
     Returns ``s`` ``(...)``, ``R`` ``(..., 3, 3)`` (det +1), ``t`` ``(..., 3)``. A batch with fewer than
     3 usable points, or all points at one place, gives NaN.
     """
-    src = np.asarray(src, dtype=np.float64)
-    dst = np.asarray(dst, dtype=np.float64)
+    src, dst = np.broadcast_arrays(np.asarray(src, dtype=np.float64), np.asarray(dst, dtype=np.float64))
     w = (np.isfinite(src).all(-1) & np.isfinite(dst).all(-1)).astype(np.float64)  # (..., m)
     count = w.sum(-1)  # (...)
     src0 = np.where(w[..., None] > 0, src, 0.0)
     dst0 = np.where(w[..., None] > 0, dst, 0.0)
-    denom = np.maximum(count, 1.0)[..., None]
-    mu_s = (w[..., None] * src0).sum(-2) / denom
-    mu_d = (w[..., None] * dst0).sum(-2) / denom
-    cs = (src0 - mu_s[..., None, :]) * w[..., None]
-    cd = (dst0 - mu_d[..., None, :]) * w[..., None]
-    cov = np.einsum("...mi,...mj->...ij", cd, cs) / denom[..., None]  # (..., 3, 3) dst x src
-    U, S, Vt = np.linalg.svd(cov)
-    d = np.sign(np.linalg.det(U) * np.linalg.det(Vt))
-    d = np.where(d == 0, 1.0, d)
-    D = np.ones(S.shape)
-    D[..., 2] = d
-    R = U @ (D[..., :, None] * Vt)
-    var_s = (cs * cs).sum((-1, -2)) / denom[..., 0]
-    if scale:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = (S * D).sum(-1) / var_s
-    else:
-        s = np.ones(count.shape)
-    t = mu_d - s[..., None] * np.einsum("...ij,...j->...i", R, mu_s)
-    bad = (count < 3) | ~(var_s > 0)
+    s, R, t = procrustes(src0, dst0, w, scale=scale)
+    mu_s = np.einsum("...m,...mi->...i", w, src0) / np.maximum(count, 1.0)[..., None]
+    spread = np.einsum("...m,...mi->...", w, (src0 - mu_s[..., None, :]) ** 2)
+    bad = (count < 3) | ~(spread > 0)
     s = np.where(bad, np.nan, s)
     R = np.where(bad[..., None, None], np.nan, R)
     t = np.where(bad[..., None], np.nan, t)

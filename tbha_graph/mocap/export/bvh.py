@@ -23,7 +23,8 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.errors import NodeError
 from ...core.node import node
-from ...core.types import File, atomic_write_bytes
+from ...core.atomic import atomic_write_bytes
+from ...core.types import File
 from ..ports import ROTATIONS
 from ..skeleton import JOINT_INDEX, JOINT_NAMES, PARENTS
 from .presets import contact_sheet, get_preset, write_checked

@@ -66,10 +66,11 @@ from typing import Sequence
 import numpy as np
 
 from ...core.errors import NodeError
-from ...core.types import atomic_write_bytes
+from ...core.atomic import atomic_write_bytes
 from ..io.bvh import Bvh, BvhJoint, POSITION_CHANNELS, bvh_positions, end_site_positions, read_bvh, write_bvh
 from ..io.skeleton_map import axes_matrix
-from ..kinematics import forward_kinematics, quat_apply, quat_mul
+from ..kinematics import forward_kinematics
+from ..quat import quat_apply, quat_mul
 
 #: Largest angle (degrees) between the rest pose's hips->head direction and the application's up axis.
 UPRIGHT_TOLERANCE_DEG = 30.0

@@ -6,11 +6,11 @@ designed filter becomes about -6 dB). Applied to every coordinate of every joint
 """
 from __future__ import annotations
 
-import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.errors import NodeError
 from ...core.node import node
+from ..lowpass import butterworth_lowpass
 from ..ports import MOTION
 from .common import motion_joints, with_joints
 
@@ -20,24 +20,6 @@ class ButterworthParams(BaseModel):
 
     cutoff: float = Field(7.0, gt=0, description="low-pass cutoff frequency (below fps / 2)", json_schema_extra={"unit": "Hz"})
     order: int = Field(4, ge=1, le=8, description="filter order of the designed filter (doubled by forward-backward filtering)")
-
-
-def butterworth_lowpass(x: np.ndarray, fps: float, cutoff: float, order: int = 4) -> np.ndarray:
-    """Zero-phase low-pass of ``x`` ``(n_frames, ...)`` along axis 0; ``fps`` and ``cutoff`` in Hz.
-
-    Clips shorter than the default padding are padded as much as they allow (``n_frames - 1``); a single
-    frame is returned unchanged. Raises ``ValueError`` if ``cutoff >= fps / 2``.
-    """
-    from scipy.signal import butter, sosfiltfilt
-
-    if cutoff >= fps / 2:
-        raise ValueError(f"cutoff {cutoff} Hz must be below the Nyquist frequency {fps / 2} Hz")
-    x = np.asarray(x, dtype=np.float64)
-    if x.shape[0] < 2:
-        return x.copy()
-    sos = butter(order, cutoff, btype="low", fs=fps, output="sos")
-    default_pad = 3 * (2 * len(sos) + 1 - min(int((sos[:, 2] == 0).sum()), int((sos[:, 5] == 0).sum())))
-    return sosfiltfilt(sos, x, axis=0, padlen=min(default_pad, x.shape[0] - 1))
 
 
 @node("filter.butterworth", version=1, inputs={"motion": MOTION}, outputs={"motion": MOTION}, params=ButterworthParams)

@@ -22,6 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from ...core.node import node
 from ...core.types import Json
 from ..ports import MOTION
+from ..rigid import procrustes
 from ..skeleton import JOINT_INDEX, JOINT_NAMES
 from .common import motion_joints, with_joints
 
@@ -38,22 +39,6 @@ class FillGapsParams(BaseModel):
 
     max_gap_frames: int = Field(15, ge=1, description="longest gap bridged by interpolation", json_schema_extra={"unit": "frame"})
     rigid_torso: bool = Field(True, description="fill torso joints from the other tracked torso joints (rigid body)")
-
-
-def _kabsch(src: np.ndarray, dst: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Batched weighted rigid fit: R ``(n, 3, 3)``, t ``(n, 3)`` with dst ≈ R src + t; src/dst ``(n, k, 3)``, w ``(n, k)``."""
-    ws = w.sum(axis=1, keepdims=True)[..., None]
-    cs = (w[..., None] * src).sum(axis=1, keepdims=True) / ws
-    cd = (w[..., None] * dst).sum(axis=1, keepdims=True) / ws
-    H = np.einsum("nki,nkj->nij", w[..., None] * (src - cs), dst - cd)
-    U, _, Vt = np.linalg.svd(H)
-    d = np.sign(np.linalg.det(np.einsum("nij,njk->nik", U, Vt).transpose(0, 2, 1)))
-    D = np.zeros_like(H)
-    D[:, 0, 0] = D[:, 1, 1] = 1.0
-    D[:, 2, 2] = d
-    R = np.einsum("nji,njk,nlk->nil", Vt, D, U)
-    t = cd[:, 0] - np.einsum("nij,nj->ni", R, cs[:, 0])
-    return R, t
 
 
 def rigid_torso_fill(joints: np.ndarray, tracked: np.ndarray) -> np.ndarray:
@@ -82,7 +67,7 @@ def rigid_group_fill(joints: np.ndarray, tracked: np.ndarray, idx: np.ndarray) -
     nearest = np.where(np.abs(frames - before) <= np.abs(after - frames), before, after)
     src = joints[nearest][:, idx]
     dst = joints[frames][:, idx]
-    R, tr = _kabsch(src, dst, t[frames].astype(float))
+    _, R, tr = procrustes(src, dst, t[frames].astype(float))  # dst ~ R src + tr
     placed = np.einsum("nij,nkj->nki", R, src) + tr[:, None, :]
     miss = ~t[frames]
     sub = joints[frames][:, idx]

@@ -28,8 +28,9 @@ from typing import Sequence
 import numpy as np
 
 from ...core.errors import Location, NodeError
-from ...core.types import atomic_write_bytes
-from ..kinematics import forward_kinematics, quat_apply, quat_mul, validate_parents
+from ...core.atomic import atomic_write_bytes
+from ..kinematics import forward_kinematics, validate_parents
+from ..quat import quat_apply, quat_mul
 
 #: Channel names as written in files (matched case-insensitively when reading).
 POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")

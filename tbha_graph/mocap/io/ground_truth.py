@@ -16,14 +16,13 @@ the same values), so frame ``i`` of the truth stays frame ``i`` of the motion.
 """
 from __future__ import annotations
 
-import zipfile
-import zlib
 from pathlib import Path
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from ...core.errors import NodeError
+from ...core.npzfile import read_npz
 from ...core.node import InputPath, node
 from ...core.types import Arrays
 from .video_identity import check_truth_video
@@ -67,34 +66,9 @@ class GroundTruthParams(BaseModel):
         return self
 
 
-#: what reading a damaged .npz raises (zip structure, deflate stream, .npy header, truncation)
-_DAMAGED = (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError, RuntimeError)
-
-
 def _read_npz(path: Path) -> dict[str, np.ndarray]:
-    if not path.is_file():
-        raise NodeError(f"ground truth {path} does not exist",
-                        hint="check the path (relative paths are resolved from the pipeline file's folder), or set path to null")
-    try:
-        z = np.load(path, allow_pickle=False)
-    except _DAMAGED as e:
-        raise NodeError(f"ground truth {path} cannot be read as an .npz without pickle: {e}",
-                        hint="use the ground_truth.npz written by synth.render_suit_video") from None
-    if not isinstance(z, np.lib.npyio.NpzFile):
-        raise NodeError(f"ground truth {path} is a single .npy array, not an .npz bundle of named arrays",
-                        hint="use the ground_truth.npz written by synth.render_suit_video")
-    try:
-        with z:
-            # numpy reads only the bytes a .npy header asks for, so the zip's CRC-32 is not checked when a
-            # damaged header declares a smaller dtype or shape than the member holds: check every member
-            damaged = z.zip.testzip()
-            if damaged is not None:
-                raise NodeError(f"ground truth {path}: {damaged} is damaged (its CRC-32 does not match)",
-                                hint="use an intact copy of the ground_truth.npz written by synth.render_suit_video")
-            return {k: z[k] for k in z.files}
-    except _DAMAGED as e:
-        raise NodeError(f"ground truth {path}: an array cannot be read without pickle: {e}",
-                        hint="use the ground_truth.npz written by synth.render_suit_video") from None
+    return read_npz(path, "ground truth", hint="use an intact ground_truth.npz written by synth.render_suit_video, "
+                    "check the path (relative paths are resolved from the pipeline file's folder), or set path to null")
 
 
 def check_ground_truth(truth: dict[str, np.ndarray], name: str = "ground truth") -> dict[str, np.ndarray]:

@@ -35,12 +35,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from ...core.atomic import atomic_path, atomic_write_text
 from ..camera import Camera
 from ..skeleton import JOINT_INDEX, JOINT_NAMES
 from .keypoint_layouts import MEDIAPIPE_POSE, OPENPOSE_BODY25, OPENPOSE_COCO18, Layout
@@ -142,12 +142,6 @@ def _events(rng: np.random.Generator, shape: tuple[int, int], rate: float) -> np
     return out
 
 
-def _atomic_write_text(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
-
-
 def _detector_view(rng, camera: Camera, world: np.ndarray, o: SynthOptions) -> tuple[np.ndarray, np.ndarray]:
     """Noisy pixels ``(n, L, 2)`` and confidence ``(n, L)`` of landmarks ``(n, L, 3)`` world."""
     px = camera.project(world)
@@ -201,9 +195,8 @@ def synthesize_keypoints(bvh_path: str | Path, out_dir: str | Path, options: Syn
         "joint_names": np.array(JOINT_NAMES),
     }
     gt_path = out / "ground_truth.npz"
-    tmp = out / f".ground_truth.tmp-{os.getpid()}.npz"
-    np.savez(tmp, **gt)
-    os.replace(tmp, gt_path)
+    with atomic_path(gt_path) as tmp, open(tmp, "wb") as f:
+        np.savez(f, **gt)
     written["ground_truth"] = gt_path
 
     if any(f.startswith("mediapipe") for f in formats):
@@ -230,7 +223,7 @@ def synthesize_keypoints(bvh_path: str | Path, out_dir: str | Path, options: Syn
             text = "{" + ",".join(f'"{k}":{json.dumps(v)}' for k, v in doc.items() if k != "frames")
             text += ',"frames":[\n' + ",\n".join(json.dumps(fr, separators=(",", ":")) for fr in frames) + "\n]}\n"
             path = out / "mediapipe.json"
-            _atomic_write_text(path, text)
+            atomic_write_text(path, text)
             written["mediapipe_json"] = path
         if "mediapipe_csv" in formats:
             lines = ["frame,landmark,x,y,z,visibility,world_x,world_y,world_z"]
@@ -239,7 +232,7 @@ def synthesize_keypoints(bvh_path: str | Path, out_dir: str | Path, options: Syn
                     a, w = img[f, i], wld[f, i]
                     lines.append(f"{f},{i},{a[0]:.5f},{a[1]:.5f},{a[2]:.4f},{a[3]:.3f},{w[0]:.4f},{w[1]:.4f},{w[2]:.4f}")
             path = out / "mediapipe.csv"
-            _atomic_write_text(path, "\n".join(lines) + "\n")
+            atomic_write_text(path, "\n".join(lines) + "\n")
             written["mediapipe_csv"] = path
 
     if "openpose" in formats:
@@ -249,7 +242,7 @@ def synthesize_keypoints(bvh_path: str | Path, out_dir: str | Path, options: Syn
         folder = out / "openpose"
         folder.mkdir(exist_ok=True)
         for f, text in enumerate(_openpose_frames(px, conf, layout)):
-            _atomic_write_text(folder / f"{name}_{f:012d}_keypoints.json", text)
+            atomic_write_text(folder / f"{name}_{f:012d}_keypoints.json", text)
         written["openpose"] = folder
     return written
 

@@ -127,12 +127,10 @@ def load_mapping(name_or_path: str | Path) -> SkeletonMapping:
 
     Raises :class:`MappingError` naming the file (and line, when known) and what is wrong.
     """
-    from ...core.yamlfile import load_yaml
+    from ...core.yamlfile import read_data_file
 
     path = resolve_mapping_path(name_or_path)
-    data, problems = load_yaml(path)  # safe loading; reports bad bytes, syntax errors and duplicate keys with their line
-    if problems:
-        raise MappingError(problems[0].message, location=problems[0].location or Location(str(path)), hint=problems[0].hint)
+    data = read_data_file(path, "skeleton mapping", MappingError)  # safe loading; bad bytes, syntax errors, duplicate keys with their line
     text = path.read_text(encoding="utf-8")
     if not isinstance(data, dict):
         raise MappingError("a mapping file must be a YAML mapping with 'units_to_metres' and 'joints'",
@@ -234,7 +232,8 @@ def rotations16_from_bvh(path: str | Path, mapping: str | Path = "cmu",
     """
     from scipy.spatial.transform import Rotation
 
-    from ..kinematics import forward_kinematics, quat_inv, quat_mul
+    from ..kinematics import forward_kinematics
+    from ..quat import quat_inv, quat_mul
     from ..skeleton import CHILDREN, PARENTS, TPOSE_DIRECTIONS
     from .bvh import bvh_to_local
 

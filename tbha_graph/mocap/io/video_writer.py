@@ -21,13 +21,14 @@ removed and ``path`` is left untouched. Use it as a context manager::
 from __future__ import annotations
 
 import logging
-import os
 from fractions import Fraction
 from pathlib import Path
 from typing import Callable
 
 import cv2
 import numpy as np
+
+from ...core.atomic import commit, discard, temp_path
 
 log = logging.getLogger(__name__)
 
@@ -45,11 +46,6 @@ def pyav_available() -> bool:
     return True
 
 
-def _temp_path(path: Path) -> Path:
-    # keep the real suffix last: OpenCV picks the container from it
-    return path.with_name(f".{path.stem}.tmp-{os.getpid()}-{id(path):x}{path.suffix or '.mp4'}")
-
-
 class VideoWriter:
     """Base of the writers: frame checks, atomic rename, context manager. ``codec`` names the codec
     actually used (``"h264"`` or ``"mp4v"``); ``frames`` counts frames written."""
@@ -62,7 +58,7 @@ class VideoWriter:
         self.width = int(width)
         self.height = int(height)
         self.frames = 0
-        self._tmp = _temp_path(self.path)
+        self._tmp = temp_path(self.path if self.path.suffix else self.path.with_name(self.path.name + ".mp4"))  # OpenCV picks the container from the suffix
         self._closed = False
 
     # --- subclass hooks -------------------------------------------------------------------------
@@ -99,7 +95,7 @@ class VideoWriter:
             self.abort()
             raise
         self._closed = True
-        os.replace(self._tmp, self.path)
+        commit(self._tmp, self.path)
         return self.path
 
     def abort(self) -> None:
@@ -110,8 +106,7 @@ class VideoWriter:
                 self._release()
             except Exception:  # noqa: BLE001 - already failing; never mask the original error
                 pass
-        if self._tmp.exists():
-            self._tmp.unlink()
+        discard(self._tmp)
 
     def __enter__(self) -> "VideoWriter":
         return self
@@ -142,8 +137,7 @@ class _PyAvWriter(VideoWriter):
             stream.options = {"crf": str(int(crf)), "preset": preset}
         except BaseException:
             self._container.close()
-            if self._tmp.exists():
-                self._tmp.unlink()
+            discard(self._tmp)
             raise
         self._stream = stream
 
@@ -170,8 +164,7 @@ class _OpenCvWriter(VideoWriter):
         self._writer = cv2.VideoWriter(str(self._tmp), cv2.VideoWriter_fourcc(*"mp4v"), self.fps, (self.width, self.height))
         if not self._writer.isOpened():
             self._writer.release()
-            if self._tmp.exists():
-                self._tmp.unlink()
+            discard(self._tmp)
             raise OSError(f"OpenCV cannot open an mp4v writer for {self.path} (is the folder writable?)")
 
     def _write(self, frame: np.ndarray) -> None:

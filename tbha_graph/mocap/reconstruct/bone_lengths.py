@@ -15,7 +15,6 @@ Sources (``method``):
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Literal
 
@@ -25,6 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from ...core.errors import NodeError
 from ...core.node import InputPath, node, optional
 from ...core.types import Json
+from ...core.yamlfile import read_data_file
 from ..calibrate.observations import read_tracks, tpose_observation
 from ..ports import CAMERA, TRACKS2D
 from ..skeleton import BONES, JOINT_INDEX, JOINT_NAMES, bone_lengths_array
@@ -53,25 +53,7 @@ def read_measurements(path: Path) -> dict[str, float]:
     path = Path(path)
     if not path.is_file():
         raise NodeError(f"bone length file {path} does not exist", hint="check the path (relative to the pipeline file)")
-    if path.suffix.lower() != ".json":
-        from ...core.yamlfile import load_yaml
-
-        data, problems = load_yaml(path)  # safe loading; bad bytes, syntax errors, duplicate keys with their line
-        if problems:
-            raise NodeError(f"{path}: cannot parse the bone lengths: {problems[0].message}", location=problems[0].location)
-        text = None
-    else:
-        try:
-            text = path.read_text(encoding="utf-8")
-        except UnicodeDecodeError as e:
-            raise NodeError(f"{path}: not UTF-8 text (byte {e.start}: {e.object[e.start]:#04x})") from None
-    try:
-        if text is not None:
-            data = json.loads(text)
-    except Exception as e:  # json.JSONDecodeError
-        mark = getattr(e, "problem_mark", None)
-        where = f"{path}:{mark.line + 1}" if mark else str(path)
-        raise NodeError(f"{where}: cannot parse the bone lengths: {getattr(e, 'problem', None) or e}") from None
+    data = read_data_file(path, "bone lengths", NodeError)  # safe YAML or JSON; errors name the file and line
     if data is None:
         data = {}
     if not isinstance(data, dict):

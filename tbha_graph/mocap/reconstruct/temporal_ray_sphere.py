@@ -41,6 +41,7 @@ from ...core.node import node
 from ...core.types import Array, Arrays, Json
 from ..calibrate.observations import read_tracks
 from ..camera import Camera
+from ..lowpass import butterworth_lowpass
 from ..ports import CAMERA, MOTION, TRACKS2D
 from ..skeleton import JOINT_INDEX, JOINT_NAMES, N_JOINTS, PARENTS
 from .body import body_lengths, tpose_on_floor
@@ -92,12 +93,9 @@ class TemporalRaySphereParams(BaseModel):
 
 def lowpass(x: np.ndarray, fps: float, cutoff: float) -> np.ndarray:
     """Zero-phase Butterworth low-pass along axis 0 (returned unchanged if the cutoff is at Nyquist or above)."""
-    from scipy.signal import butter, sosfiltfilt
-
     if cutoff >= fps / 2 or x.shape[0] < 16:
         return x.copy()
-    sos = butter(2, cutoff, fs=fps, output="sos")
-    return sosfiltfilt(sos, x, axis=0, padlen=min(15, x.shape[0] - 1))
+    return butterworth_lowpass(x, fps, cutoff, order=2, padlen=15)
 
 
 def torso_poses(cam: Camera, pixels: np.ndarray, shape: np.ndarray, fps: float, cutoff: float) -> np.ndarray:

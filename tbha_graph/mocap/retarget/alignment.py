@@ -11,7 +11,7 @@ capture's bones point. Positions are world metres, y up, facing +z; quaternions 
   rest directions (no twist about the bone is introduced);
 * ``hips`` and ``chest`` (three outgoing bones): the spine direction (to chest / neck) exactly and the
   left-right axis (between the hip joints / shoulders) as closely as possible
-  (:func:`tbha_graph.mocap.rotations.quat.rotation_from_pairs`);
+  (:func:`tbha_graph.mocap.quat.rotation_from_pairs`);
 * leaves (head, wrists, ankles: no bone beyond them in the capture): the parent's alignment, so a leaf
   at rest relative to its parent in the capture is at rest relative to its parent on the character.
 """
@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..kinematics import forward_kinematics
-from ..rotations.quat import rotation_from_pairs, shortest_arc
+from ..quat import rotation_from_pairs, shortest_arc
 from ..skeleton import CHILDREN, JOINT_INDEX, N_JOINTS, PARENTS
 
 _HIPS, _CHEST = JOINT_INDEX["hips"], JOINT_INDEX["chest"]

@@ -31,8 +31,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..kinematics import forward_kinematics, quat_inv, quat_mul
-from ..rotations.quat import from_axis_angle, rotation_vector
+from ..kinematics import forward_kinematics
+from ..quat import from_axis_angle, quat_inv, quat_mul, rotation_vector
 from ..skeleton import JOINT_INDEX, JOINT_NAMES, N_JOINTS, PARENTS
 from .alignment import leg_height, rest_alignment, rest_positions16
 from .character import Character

@@ -32,9 +32,8 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from ..kinematics import quat_apply, quat_mul
 from ..skeleton import CHILDREN, JOINT_INDEX, N_JOINTS, PARENTS, TPOSE_DIRECTIONS, measure_bone_lengths
-from .quat import conj, continuous, dot, from_axis_angle, identity, shortest_arc, swing_twist, unit
+from ..quat import conj, continuous, dot, from_axis_angle, identity, quat_apply, quat_mul, shortest_arc, swing_twist, unit
 from .rest import HINGES, LEAVES, TORSO, TorsoReference, TorsoRest, end_offsets, rest_offsets
 
 #: joints with exactly one child, grouped so that parents are solved before children

@@ -19,6 +19,7 @@ from pydantic import Field
 from ...core.node import node
 from ..filter.common import motion_joints
 from ..ports import MOTION, ROTATIONS
+from ..rigid import procrustes
 from ..skeleton import CHILDREN
 from .common import SolverParams, empty_world, rest_directions, rest_skeleton, rotations_bundle, solve_swings
 from .rest import TORSO
@@ -39,12 +40,7 @@ def _subtree_size(j: int) -> int:
 def kabsch(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Rotation matrices ``(n, 3, 3)`` minimising ``sum_k w_k |R a_k - b_k|^2``; ``a`` ``(k, 3)`` or
     ``(n, k, 3)``, ``b`` ``(n, k, 3)``, ``w`` ``(k,)``. Always proper rotations (det +1)."""
-    h = np.einsum("k,...ki,nkj->nij", w, a, b)  # sum_k w a b^T
-    u, _, vt = np.linalg.svd(h)
-    d = np.sign(np.linalg.det(np.matmul(u, vt)))
-    d = np.where(d == 0, 1.0, d)
-    vt[:, 2, :] *= d[:, None]
-    return np.matmul(vt.transpose(0, 2, 1), u.transpose(0, 2, 1))
+    return procrustes(a, b, w, center=False)[1]
 
 
 def kabsch_rotations(joints: np.ndarray, fps: float, params: KabschParams | None = None) -> dict[str, np.ndarray]:

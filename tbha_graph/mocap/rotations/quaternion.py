@@ -24,7 +24,7 @@ from ...core.node import node
 from ..filter.common import motion_joints
 from ..ports import MOTION, ROTATIONS
 from .common import SolverParams, empty_world, rest_directions, rest_skeleton, rotations_bundle, solve_swings
-from .quat import rotation_from_pairs
+from ..quat import rotation_from_pairs
 from .rest import TORSO, TorsoReference, rest_points, torso_vectors
 
 

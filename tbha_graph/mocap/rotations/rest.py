@@ -34,7 +34,7 @@ from typing import Literal
 import numpy as np
 
 from ..skeleton import JOINT_INDEX, N_JOINTS, PARENTS, TPOSE_DIRECTIONS
-from .quat import unit
+from ..quat import unit
 
 TorsoRest = Literal["measured", "tpose"]
 TorsoReference = Literal["triangle", "spine"]

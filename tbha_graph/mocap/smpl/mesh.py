@@ -7,12 +7,12 @@ and most viewers import the objects separately. Frames ``start, start + step, ..
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from ...core.atomic import atomic_path
 from ...core.errors import NodeError
 from ...core.node import InputPath, node
 from ...core.types import File
@@ -39,15 +39,13 @@ class MeshParams(BaseModel):
 def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray, names: list[str]) -> None:
     """Write meshes ``vertices`` (k, V, 3) sharing ``faces`` (F, 3) as one OBJ with k objects, atomically."""
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     V = vertices.shape[1]
-    with open(tmp, "w", encoding="ascii") as f:
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="ascii") as f:
         f.write("# SMPL meshes written by tbha-graph (smpl.mesh); metres, y up unless the parameters say otherwise\n")
         for i, (verts, name) in enumerate(zip(vertices, names)):
             f.write(f"o {name}\n")
             np.savetxt(f, verts, fmt="v %.6f %.6f %.6f")
             np.savetxt(f, faces + 1 + i * V, fmt="f %d %d %d")
-    os.replace(tmp, path)
 
 
 @node("smpl.mesh", version=1, inputs={"smpl": SMPL_PARAMS}, outputs={"mesh": File("mesh", ".obj")}, params=MeshParams)

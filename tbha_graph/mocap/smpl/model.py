@@ -21,13 +21,14 @@ Equations (:meth:`SmplModel.forward`), for shape β (B,), pose θ (n, 24, 3) axi
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from ...core.atomic import atomic_path
 from ...core.errors import NodeError
+from ...core.npzfile import read_npz
 from .kintree import N_POSE_FEATURES, N_SMPL_JOINTS, SMPL_PARENTS
 
 REQUIRED_KEYS = ("v_template", "shapedirs", "posedirs", "J_regressor", "weights", "kintree_table", "f")
@@ -98,13 +99,8 @@ def save_model_npz(arrays: dict[str, np.ndarray], path: str | Path) -> None:
     """Write checked model arrays to ``path`` (.npz) atomically (temp file in the same folder + rename)."""
     path = Path(path)
     checked = check_model_arrays(arrays, str(path))
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}.npz")
-    try:
-        np.savez(tmp, **checked)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.savez(f, **checked)
 
 
 def rodrigues(rotvec: np.ndarray) -> np.ndarray:
@@ -200,17 +196,5 @@ def load_model(path: str | Path) -> SmplModel:
                         hint=f"convert it once: python -m tbha_graph.mocap.smpl.convert {path} {path.with_suffix('.npz')}")
     if not path.is_file():
         raise NodeError(f"SMPL model file {path} does not exist", hint=HOW_TO_GET_THE_MODEL)
-    import zipfile
-    import zlib
-
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            # numpy reads only the bytes a .npy header asks for: without this, a damaged header declaring a
-            # smaller dtype skips the zip's CRC-32 check and the array is read as garbage
-            damaged = z.zip.testzip() if hasattr(z, "zip") else None
-            if damaged is not None:
-                raise NodeError(f"{path}: {damaged} is damaged (its CRC-32 does not match)", hint=HOW_TO_GET_THE_MODEL)
-            arrays = {k: z[k] for k in z.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error, NotImplementedError, RuntimeError) as e:
-        raise NodeError(f"{path}: cannot be read as an .npz without pickle: {e}", hint=HOW_TO_GET_THE_MODEL) from None
+    arrays = read_npz(path, "SMPL model file", hint=HOW_TO_GET_THE_MODEL)  # no pickle, every member's CRC checked
     return SmplModel.from_arrays(arrays, str(path))

@@ -29,7 +29,7 @@ from typing import Literal
 
 import numpy as np
 
-from ..kinematics import quat_inv, quat_mul
+from ..quat import quat_inv, quat_mul
 from ..skeleton import JOINT_INDEX, N_JOINTS, PARENTS, TPOSE_DIRECTIONS
 from .kintree import (
     LIMB_SEGMENTS, N_SMPL_JOINTS, SMPL_FROM_TBHA, SMPL_INDEX, SMPL_JOINT_NAMES, SMPL_PARENTS, SPINE_JOINTS,

@@ -9,11 +9,11 @@ Deterministic: the same code gives the same files.
 from __future__ import annotations
 
 import argparse
-import os
 from pathlib import Path
 
 import numpy as np
 
+from ...core.atomic import atomic_path
 from ..camera import Camera
 from ..suit import load_suit
 from .camera import CameraParams
@@ -33,14 +33,8 @@ def make_sample(out_dir: Path, bvh: Path = DEFAULT_BVH, seed: int = 0) -> tuple[
     video = out_dir / "sample.mp4"
     gt = render_video(joints, fps, cam, load_suit(), RenderParams(seed=seed), video)
     npz = out_dir / "ground_truth.npz"
-    tmp = out_dir / f".ground_truth.part-{os.getpid()}.npz"
-    try:
-        with open(tmp, "wb") as f:
-            np.savez_compressed(f, **gt)
-        os.replace(tmp, npz)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    with atomic_path(npz) as tmp, open(tmp, "wb") as f:
+        np.savez_compressed(f, **gt)
     return video, npz
 
 

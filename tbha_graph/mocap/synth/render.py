@@ -11,7 +11,6 @@ given ``seed``.
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Callable, Iterable, Literal
 
@@ -19,6 +18,7 @@ import cv2
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from ...core.atomic import commit, discard, temp_path
 from ...core.errors import NodeError
 from ...core.node import InputPath
 from ..camera import Camera
@@ -133,7 +133,7 @@ def render_video(
     patch_world = np.empty((n, 15, 3))
     visible = np.zeros((n, 15), dtype=bool)
     path = Path(path)
-    tmp = path.with_name(f".{path.stem}.part-{os.getpid()}{path.suffix}")
+    tmp = temp_path(path)
     writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), float(p.fps), (cam.width, cam.height))
     if not writer.isOpened():
         raise NodeError(f"cannot open {tmp} for writing an mp4v video", hint="check the folder is writable")
@@ -175,11 +175,10 @@ def render_video(
         writer.release()
         if not tmp.is_file() or tmp.stat().st_size == 0:
             raise NodeError(f"OpenCV wrote no video to {tmp}", hint="the mp4v encoder may be missing from this OpenCV build")
-        os.replace(tmp, path)
+        commit(tmp, path)
     finally:
         writer.release()
-        if tmp.exists():
-            tmp.unlink()
+        discard(tmp)
     gt = ground_truth(world, patch_world, visible, cam, p.fps, suit)
     gt.update(video_identity(path, frames=n))  # the truth applies to this video only (io.ground_truth checks it)
     return gt

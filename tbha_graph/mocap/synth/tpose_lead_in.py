@@ -31,7 +31,8 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.errors import NodeError
 from ...core.node import InputPath, node
-from ..kinematics import forward_kinematics, quat_inv, quat_mul
+from ..kinematics import forward_kinematics
+from ..quat import quat_inv, quat_mul
 from ..ports import MOTION
 from ..skeleton import JOINT_INDEX, JOINT_NAMES, TPOSE_DIRECTIONS
 

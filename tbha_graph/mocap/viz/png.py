@@ -1,21 +1,17 @@
 """Saving a matplotlib figure as a PNG atomically (temporary file in the same folder, then rename)."""
 from __future__ import annotations
 
-import os
 from pathlib import Path
+
+from ...core.atomic import atomic_path
 
 
 def save_png(fig, path: str | Path, dpi: int) -> Path:
     """Write ``fig`` (a ``matplotlib.figure.Figure``) to ``path`` as PNG at ``dpi``; nothing is left
     at ``path`` if saving fails."""
     path = Path(path)
-    tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}.png")
-    try:
+    with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=dpi)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return path
 
 

@@ -1,8 +1,17 @@
-"""Vectorised rotation math for the rotation solvers (seed 002), quaternions in scipy order (x, y, z, w).
+"""Quaternions: the project's one module of quaternion and rotation-vector math (numpy only).
 
-Every function broadcasts over leading axes (frames, joints) and never returns NaN: zero-length
-vectors, parallel / anti-parallel pairs and collinear reference points fall back to a documented
-choice instead. Products, inverses and vector rotation come from :mod:`tbha_graph.mocap.kinematics`.
+Quaternions are stored in scipy's scalar-last order ``(x, y, z, w)`` as float64 arrays of shape
+``(..., 4)``; every function broadcasts over the leading axes (frames, joints). Rotations act on column
+vectors (``q`` applied to ``v`` is ``R(q) @ v``) and ``quat_mul(a, b)`` is the rotation "first ``b``,
+then ``a``", i.e. ``R(a) @ R(b)``, matching ``scipy.spatial.transform.Rotation`` (``Ra * Rb``). Plain
+numpy arithmetic is several times faster than building scipy ``Rotation`` objects for small batches.
+
+* :func:`quat_mul`, :func:`quat_inv`, :func:`conj`, :func:`quat_apply`, :func:`quat_to_matrix`,
+  :func:`quat_normalize`, :func:`identity`, :func:`from_axis_angle`, :func:`rotation_vector`,
+  :func:`angle_of`: arithmetic and conversions.
+
+The rotation solvers' constructions (seed 002) never return NaN: zero-length vectors, parallel /
+anti-parallel pairs and collinear reference points fall back to a documented choice instead.
 
 * :func:`shortest_arc` — seed 002 "no reference point": the smallest rotation taking ``a`` to ``b``.
 * :func:`rotation_from_pairs` — seed 002 "with reference points": the rotation taking ``u1 -> v1``
@@ -14,7 +23,68 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kinematics import quat_mul
+
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product ``a * b`` of quaternions ``(..., 4)`` xyzw; broadcasts; returns ``(..., 4)``."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    return np.stack(
+        (
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ),
+        axis=-1,
+    )
+
+
+def quat_inv(q: np.ndarray) -> np.ndarray:
+    """Inverse of quaternions ``(..., 4)`` xyzw (conjugate divided by the squared norm)."""
+    q = np.asarray(q, dtype=np.float64)
+    conj = q * np.array([-1.0, -1.0, -1.0, 1.0])
+    return conj / np.sum(q * q, axis=-1, keepdims=True)
+
+
+def quat_apply(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors ``v`` ``(..., 3)`` by unit quaternions ``q`` ``(..., 4)`` xyzw; broadcasts.
+
+    Uses ``v' = v + 2w (u x v) + 2 u x (u x v)`` with ``u`` the vector part (no matrices built).
+    """
+    q = np.asarray(q, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    u = q[..., :3]
+    w = q[..., 3:4]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)`` xyzw."""
+    q = np.asarray(q, dtype=np.float64)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    wx, wy, wz = w * x, w * y, w * z
+    m = np.stack(
+        (
+            1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy),
+            2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx),
+            2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy),
+        ),
+        axis=-1,
+    )
+    return m.reshape(q.shape[:-1] + (3, 3))
+
+
+def quat_normalize(q: np.ndarray) -> np.ndarray:
+    """Quaternions ``(..., 4)`` scaled to unit norm."""
+    q = np.asarray(q, dtype=np.float64)
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
 
 #: vectors shorter than this are treated as zero (metres or unit-free, inputs are O(1))
 EPS = 1e-12
