@@ -16,7 +16,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import sys
 import time
 import uuid
 from dataclasses import dataclass
@@ -24,20 +23,11 @@ from pathlib import Path
 from typing import Any, Callable
 
 from .errors import CacheError
-from .types import AnyOf, AnyType, File, PortType, concrete_type_of, hash_file, storage_type
+from .filehash import StatMemo, file_content_hash, memo_for
+from .paths import default_cache_dir
+from .types import AnyOf, AnyType, File, Model, PortType, concrete_type_of, hash_file, storage_type
 
-
-def default_cache_dir() -> Path:
-    """``$TBHA_CACHE_DIR``, else ``$XDG_CACHE_HOME/tbha-graph`` (``~/.cache``), ``~/Library/Caches`` on
-    macOS, ``%LOCALAPPDATA%`` on Windows."""
-    env = os.environ.get("TBHA_CACHE_DIR")
-    if env:
-        return Path(env).expanduser()
-    if sys.platform == "darwin":
-        return Path.home() / "Library" / "Caches" / "tbha-graph"
-    if os.name == "nt":
-        return Path(os.environ.get("LOCALAPPDATA", Path.home())) / "tbha-graph" / "Cache"
-    return Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "tbha-graph"
+__all__ = ["Cache", "CorruptEntry", "Entry", "default_cache_dir"]
 
 
 class CorruptEntry(CacheError):
@@ -67,19 +57,47 @@ class Entry:
             raise CorruptEntry(f"cache entry {self.key[:12]}: checksum mismatch in {f.name}")
         t = declared
         if isinstance(declared, (AnyOf, AnyType)):
-            t = _stored_type(declared, info["storage"])
+            t = _stored_type(declared, info, self.key)
         try:
             return t.load(f)
         except Exception as e:  # noqa: BLE001 - any parse failure of stored data is corruption
             raise CorruptEntry(f"cache entry {self.key[:12]}: cannot load {f.name}: {e}") from None
 
 
-def _stored_type(declared: PortType, storage: str) -> PortType:
+def _model_ref(cls: type) -> str:
+    return f"{cls.__module__}:{cls.__qualname__}"
+
+
+def _model_class(ref: str, key: str) -> type:
+    """The pydantic model class named ``module:qualname`` in an entry (a Model stored under Any)."""
+    import importlib
+
+    from pydantic import BaseModel
+
+    module, _, qual = str(ref).partition(":")
+    try:
+        obj: Any = importlib.import_module(module)
+        for part in qual.split("."):
+            obj = getattr(obj, part)
+    except Exception as e:  # noqa: BLE001 - the class is gone or renamed: the entry cannot be read back
+        raise CorruptEntry(f"cache entry {key[:12]}: its model class {ref} cannot be found: {e}") from None
+    if not (isinstance(obj, type) and issubclass(obj, BaseModel)):
+        raise CorruptEntry(f"cache entry {key[:12]}: {ref} is not a pydantic model class")
+    return obj
+
+
+def _stored_type(declared: PortType, info: dict, key: str) -> PortType:
+    storage = info.get("storage")
     if isinstance(declared, AnyOf):
         for o in declared.options:
-            if type(o).__name__ == storage:
+            if type(o).__name__ == storage and (not isinstance(o, Model) or _model_ref(o.model) == info.get("model")):
                 return o
-    return storage_type(storage)
+    if storage == "Model":
+        return Model(_model_class(info.get("model", ""), key))
+    try:
+        return storage_type(str(storage))
+    except KeyError:
+        raise CorruptEntry(f"cache entry {key[:12]}: unknown storage type {storage!r}") from None
 
 
 class Cache:
@@ -93,6 +111,18 @@ class Cache:
         self.entries = self.root / "entries"
         self._entries_str = str(self.entries)
         self.tmp = self.root / "tmp"
+        self.file_memo: StatMemo = memo_for(self.root, "filehash")  # per cache folder, shared in the process
+        self.code_memo: StatMemo = memo_for(self.root, "codehash")
+
+    def file_hash(self, path: Path) -> str:
+        """SHA-256 of a file's content, memoised in this cache folder's memo."""
+        return file_content_hash(path, self.root)
+
+    def key(self, spec: Any, params: Any, input_fingerprints: dict[str, str | None]) -> str:
+        """The cache key of one node evaluation (:func:`.keys.node_key` with this cache's memos)."""
+        from .keys import node_key
+
+        return node_key(spec, params, input_fingerprints, file_hash=self.file_hash, code_memo=self.code_memo)
 
     def _entry_dir(self, key: str) -> Path:
         return self.entries / key[:2] / key
@@ -142,13 +172,17 @@ class Cache:
                 fname = port + (t.suffix or (Path(str(value)).suffix if isinstance(t, File) else ".dat"))
                 f = work / fname
                 t.save(value, f)
+                digest = hash_file(f)
                 meta_out[port] = {
                     "file": fname,
                     "storage": type(t).__name__,
-                    "fingerprint": t.fingerprint(value),
-                    "sha256": hash_file(f),
+                    # a stored file's fingerprint is its content hash, which was just computed
+                    "fingerprint": digest if isinstance(t, File) else t.fingerprint(value),
+                    "sha256": digest,
                     "bytes": f.stat().st_size,
                 }
+                if isinstance(t, Model):
+                    meta_out[port]["model"] = _model_ref(t.model)
             if self.after_payload_hook is not None:
                 self.after_payload_hook(work)
             meta = {"key": key, "created": time.time(), "outputs": meta_out, **info}
@@ -232,8 +266,8 @@ class Cache:
         return {"removed_entries": removed, "removed_tmp": removed_tmp, "bytes_left": total}
 
     def touch(self, entry: Entry) -> None:
-        """Mark an entry as used (for ``gc``'s least-recently-used order)."""
+        """Mark an entry as used (for ``gc``'s least-recently-used order): its meta.json's mtime."""
         try:
-            os.utime(entry.path / "meta.json")
+            os.utime(os.path.join(entry.path, "meta.json"))
         except OSError:
             pass

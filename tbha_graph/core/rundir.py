@@ -56,7 +56,7 @@ def manifest(run: RunResult, executor: str, files: list[str] | None = None) -> d
     for nid, res in run.results.items():
         b = g.nodes[nid]
         try:
-            params = canonical_params(b.params)
+            params = canonical_params(b.params, effective=False)
         except TbhaError:
             params = b.params.model_dump(mode="json")
         nodes[nid] = {

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from .cache import Cache
+from .filehash import using_cache_dir
 from .graph import Graph, build_graph
 from .progress import QUIET, Reporter
 from .registry import Registry
@@ -58,19 +59,25 @@ def run_graph(
     ids = targets_of(graph, outputs)
     t0 = time.perf_counter()
     work_root = Path(tempfile.mkdtemp(prefix="tbha-run-"))
+    private = None
     try:
-        if executor == "local":
-            results = run_local(graph, ids, c, reporter, work_root, materialise=list(graph.outputs.values()) if out_dir is not None else [])
-        elif executor == "dask":
-            from .executors.dask_executor import run_dask
+        with using_cache_dir(c.root if c is not None else None):  # file-hash memo of this run's cache
+            if executor == "local":
+                results = run_local(graph, ids, c, reporter, work_root, materialise=list(graph.outputs.values()) if out_dir is not None else [])
+            elif executor == "dask":
+                from .executors.dask_executor import run_dask
 
-            results = run_dask(graph, ids, c, reporter, scheduler=scheduler, workers=workers)
-        else:
-            raise ValueError(f"unknown executor {executor!r} (local or dask)")
-        run = RunResult(graph, results, time.perf_counter() - t0)
-        if out_dir is not None:
-            write_run_dir(run, Path(out_dir), executor)
-        return run
+                if c is None:  # values travel between workers through a cache: a private one, removed below
+                    private = work_root / "cache"
+                results = run_dask(graph, ids, c if c is not None else Cache(private), reporter, scheduler=scheduler, workers=workers)
+            else:
+                raise ValueError(f"unknown executor {executor!r} (local or dask)")
+            run = RunResult(graph, results, time.perf_counter() - t0)
+            if out_dir is not None:
+                write_run_dir(run, Path(out_dir), executor)
+            return run
     finally:
-        if c is not None:  # file outputs were moved into the cache; the work folders can go
+        # file outputs were moved into the cache, so the work folders can go; a private cache only once the
+        # outputs are written (without out_dir its entries hold the run's values, as the work folders do)
+        if c is not None or (private is not None and out_dir is not None):
             shutil.rmtree(work_root, ignore_errors=True)

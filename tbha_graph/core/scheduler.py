@@ -17,7 +17,7 @@ from typing import Any
 from .cache import Cache, CorruptEntry, Entry
 from .errors import NodeFailed, PortTypeError, TbhaError
 from .graph import BoundNode, Graph
-from .keys import node_key
+from .filehash import using_cache_dir
 from .node import Context
 from .progress import QUIET, Reporter
 
@@ -93,7 +93,7 @@ def execute_node(
         fps = {port: inputs[src].fingerprints[sport] for port, (src, sport) in bound.inputs.items()}
         for port in spec.inputs:
             fps.setdefault(port, None)
-        key = node_key(spec, bound.params, fps)
+        key = cache.key(spec, bound.params, fps)
         try:
             entry = cache.lookup(key)
         except CorruptEntry as e:
@@ -103,6 +103,7 @@ def execute_node(
         if entry is not None:
             outs = entry.meta.get("outputs", {})
             if set(outs) == set(spec.outputs):
+                cache.touch(entry)  # gc removes the least recently *used* entries
                 nw = [str(w) for w in entry.meta.get("node_warnings", []) if isinstance(w, str)]
                 return NodeResult(bound.id, "cached", key, time.perf_counter() - t0,
                                   {p: outs[p]["fingerprint"] for p in outs}, None, str(entry.path), entry.meta, warnings, nw)
@@ -117,7 +118,8 @@ def execute_node(
         work_dir = work_root / f"{bound.id}-{time.monotonic_ns()}"
     ctx = Context(bound.id, bound.params, work_dir=work_dir, reporter=reporter)
     try:
-        out = _normalise_outputs(bound, spec.fn(ctx, **args))
+        with using_cache_dir(cache.root if cache is not None else None):  # file-hash memo of this run's cache
+            out = _normalise_outputs(bound, spec.fn(ctx, **args))
     except TbhaError as e:
         raise NodeFailed(e.message, hint=e.hint, node=bound.id, location=e.location) from e
     except Exception as e:  # noqa: BLE001 - a bug in a node: keep the traceback for its author

@@ -348,9 +348,7 @@ class File(PortType):
         return path
 
     def fingerprint(self, value: Path) -> str:
-        from .filehash import file_content_hash
-
-        return file_content_hash(Path(value))
+        return hash_file(Path(value))  # the content (the cache memoises it by path, size and mtime)
 
 
 # ---------------------------------------------------------------------------------------------

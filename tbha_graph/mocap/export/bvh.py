@@ -64,6 +64,22 @@ class ExportBvhParams(BaseModel):
                         "false the 'sheet' output is a small placeholder image")
     sheet_frames: int = Field(4, ge=1, le=12, description="frames drawn on the contact sheet")
 
+    def effective(self) -> dict:
+        """What the outputs depend on, for the cache key: the resolved layout (a preset's values unless
+        ``scale`` / ``rotation_order`` are set explicitly), not the params as written. The preset's name
+        and application appear only in the contact sheet's title."""
+        layout = preset_for(self)
+        out = {
+            "layout": {k: getattr(layout, k) for k in ("file_axes", "units_per_metre", "rotation_order", "naming",
+                                                       "app_axes", "app_up", "app_forward", "tolerance_m")},
+            "precision": self.precision,
+            "sheet": self.sheet,
+        }
+        if self.sheet:
+            out["sheet_frames"] = self.sheet_frames
+            out["sheet_title"] = [layout.name, layout.app]
+        return out
+
 
 def checked_rotations(rot: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
     """Validate and normalise a ROTATIONS bundle: ``(local_quat (n, 16, 4) unit, root_position (n, 3),
