@@ -23,7 +23,7 @@ from fuzzlib import CASES, assert_names_file, case, fuzz_settings, mutated, time
 from tbha_graph.core.yamlfile import load_yaml
 from tbha_graph.mocap.calibrate.known import read_camera_file
 from tbha_graph.mocap.reconstruct.bone_lengths import read_measurements
-from tbha_graph.mocap.reconstruct.body import lengths_to_body
+from tbha_graph.mocap.body import lengths_to_body
 from tbha_graph.mocap.skeleton import bone_lengths_array
 
 SAMPLE = Path(__file__).resolve().parents[2] / "data" / "sample" / "ground_truth.npz"

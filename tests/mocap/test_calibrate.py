@@ -13,7 +13,7 @@ from tbha_graph.mocap.calibrate.known import known
 from tbha_graph.mocap.calibrate.pnp import pnp
 from tbha_graph.mocap.calibrate.tsai_coplanar import rotation_angle_deg, tsai_coplanar
 from tbha_graph.mocap.camera import Camera
-from tbha_graph.mocap.reconstruct.body import body_lengths, tpose_on_floor
+from tbha_graph.mocap.body import body_lengths, tpose_on_floor
 from tbha_graph.mocap.skeleton import JOINT_INDEX, JOINT_NAMES
 
 W, H = 640, 480

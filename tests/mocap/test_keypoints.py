@@ -17,7 +17,7 @@ from tbha_graph.mocap.io.keypoint_layouts import (
 from tbha_graph.mocap.io.mediapipe_keypoints import mediapipe_keypoints
 from tbha_graph.mocap.io.mediapipe_world import MEDIAPIPE_TO_WORLD, mediapipe_world
 from tbha_graph.mocap.io.openpose_keypoints import openpose_keypoints
-from tbha_graph.mocap.io.keypoints_synth import SynthOptions, anatomical_points, synthesize_keypoints
+from tbha_graph.mocap.synth.keypoints import SynthOptions, anatomical_points, synthesize_keypoints
 from tbha_graph.mocap.skeleton import JOINT_INDEX, measure_bone_lengths
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -16,7 +16,7 @@ from tbha_graph.core.errors import NodeError
 from tbha_graph.core.testing import run_node
 from tbha_graph.mocap.calibrate.tsai_coplanar import tsai_coplanar
 from tbha_graph.mocap.camera import Camera
-from tbha_graph.mocap.reconstruct.body import body_lengths, lengths_to_body, tpose_on_floor
+from tbha_graph.mocap.body import body_lengths, lengths_to_body, tpose_on_floor
 from tbha_graph.mocap.reconstruct.bone_lengths import bone_lengths
 from tbha_graph.mocap.reconstruct.lead_in import tpose_lead_in
 from tbha_graph.mocap.reconstruct.ray_sphere import EXPANSION, ray_sphere, solve_ray_sphere

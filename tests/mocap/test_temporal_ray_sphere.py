@@ -11,7 +11,7 @@ from tbha_graph.core.testing import run_node
 from tbha_graph.mocap.camera import Camera
 from tbha_graph.mocap.reconstruct.ray_sphere import solve_ray_sphere
 from tbha_graph.mocap.reconstruct.temporal_ray_sphere import choose_signs, temporal_ray_sphere
-from tbha_graph.mocap.reconstruct.body import lengths_to_body
+from tbha_graph.mocap.body import lengths_to_body
 
 GT = Path(__file__).resolve().parents[2] / "data" / "sample" / "ground_truth.npz"
 

@@ -8,7 +8,7 @@ from typing import Sequence
 import numpy as np
 
 from ...core.errors import NodeError, did_you_mean
-from ..reconstruct.body import body_lengths, tpose_on_floor
+from ..body import body_lengths, tpose_on_floor
 from ..skeleton import CALIBRATION_JOINTS, JOINT_INDEX, JOINT_NAMES, N_JOINTS
 
 
@@ -88,7 +88,7 @@ def check_joint_names(names: list[str]) -> list[str]:
 def model_points(body: dict | None, ankle_height: float, joints: Sequence[str] = CALIBRATION_JOINTS, where: str = "body") -> np.ndarray:
     """World positions ``(len(joints), 3)`` metres of ``joints`` in the rest T-pose, all on the plane z = 0.
 
-    Calibration world frame (:func:`tbha_graph.mocap.reconstruct.body.tpose_on_floor`): metres, y up,
+    Calibration world frame (:func:`tbha_graph.mocap.body.tpose_on_floor`): metres, y up,
     x = actor's left, actor faces +z, origin on the floor below the hips joint.
     """
     rest = tpose_on_floor(body_lengths(body, where), ankle_height)

@@ -19,7 +19,7 @@ from ...core.node import node, optional
 from ...core.types import Json
 from ..camera import Camera
 from ..ports import CAMERA, TRACKS2D
-from ..reconstruct.body import DEFAULT_ANKLE_HEIGHT
+from ..body import DEFAULT_ANKLE_HEIGHT
 from ..skeleton import CALIBRATION_JOINTS
 from .observations import check_joint_names, model_points, read_tracks, tpose_observation
 from .report import calibration_report

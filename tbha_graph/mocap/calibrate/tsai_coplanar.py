@@ -5,7 +5,7 @@ Method (seed 000, section 3.1; Tsai 1987, coplanar case, no lens distortion, squ
 1. Image points ``(Xd, Yd)`` in pixels relative to the image centre ``((w-1)/2, (h-1)/2)``, x right,
    y down, averaged over the first T-pose frames, of neck, chest, hips, left and right shoulder.
 2. World points ``(Xw, Yw, 0)`` of the same joints from the bone lengths: the rest T-pose of
-   :func:`tbha_graph.mocap.reconstruct.body.tpose_on_floor`. **World frame of the output camera**:
+   :func:`tbha_graph.mocap.body.tpose_on_floor`. **World frame of the output camera**:
    metres, y up, x = actor's left, the actor faces +z, the torso (coronal) plane is z = 0 and the origin
    is on the floor (y = 0) straight below the hips joint, whose height is the leg length plus
    ``ankle_height``. Putting the origin on the floor rather than at the torso keeps ``Ty`` (the height of the
@@ -41,7 +41,7 @@ from ...core.types import Json
 from ..camera import Camera
 from ..ports import CAMERA, TRACKS2D
 from ..skeleton import CALIBRATION_JOINTS
-from ..reconstruct.body import DEFAULT_ANKLE_HEIGHT
+from ..body import DEFAULT_ANKLE_HEIGHT
 from .observations import check_joint_names, model_points, read_tracks, tpose_observation
 from .report import calibration_report, refine_pose
 

@@ -56,7 +56,7 @@ from ...core.types import Array, Arrays, Json
 from .verdict import verdict
 from ..io.ground_truth import TRUTH, check_ground_truth, truth_joints2d, truth_visibility
 from ..ports import CAMERA, METRICS, MOTION, TRACKS2D
-from ..reconstruct.body import DEFAULT_ANKLE_HEIGHT
+from ..body import DEFAULT_ANKLE_HEIGHT
 from ..skeleton import JOINT_NAMES, N_JOINTS, PATCHED_JOINTS
 from . import measures as m
 from .doubtful import doubtful_bits, doubtful_ranges

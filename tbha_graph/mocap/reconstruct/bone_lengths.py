@@ -28,7 +28,7 @@ from ...core.yamlfile import read_data_file
 from ..calibrate.observations import read_tracks, tpose_observation
 from ..ports import CAMERA, TRACKS2D
 from ..skeleton import BONES, JOINT_INDEX, JOINT_NAMES, bone_lengths_array
-from .body import DEFAULT_ANKLE_HEIGHT, DEFAULT_STATURE, body_lengths, check_bone_names, lengths_to_body
+from ..body import DEFAULT_ANKLE_HEIGHT, DEFAULT_STATURE, body_lengths, check_bone_names, lengths_to_body
 
 #: Left/right bone pairs, as child joint indices.
 MIRROR_PAIRS = tuple(

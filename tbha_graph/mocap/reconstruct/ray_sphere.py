@@ -50,7 +50,7 @@ from ..calibrate.observations import read_tracks
 from ..camera import Camera
 from ..ports import CAMERA, MOTION, TRACKS2D
 from ..skeleton import JOINT_INDEX, JOINT_NAMES, N_JOINTS, PARENTS, TRIANGLE_JOINTS
-from .body import body_lengths
+from ..body import body_lengths
 
 _CHEST = JOINT_INDEX["chest"]
 _TRI = np.array([JOINT_INDEX[j] for j in TRIANGLE_JOINTS])

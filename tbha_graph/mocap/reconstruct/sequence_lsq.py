@@ -36,7 +36,7 @@ from ..calibrate.observations import read_tracks
 from ..camera import Camera
 from ..ports import CAMERA, MOTION, TRACKS2D
 from ..skeleton import BONES, JOINT_INDEX, N_JOINTS
-from .body import body_lengths
+from ..body import body_lengths
 from .ray_sphere import check_image_size, motion_bundle, ray_directions, solve_ray_sphere
 
 _LS, _RS = JOINT_INDEX["left_shoulder"], JOINT_INDEX["right_shoulder"]

@@ -55,7 +55,7 @@ from ..calibrate.pnp import solve_pnp_planar
 from ..camera import Camera
 from ..ports import CAMERA, MOTION, TRACKS2D
 from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS
-from .body import DEFAULT_ANKLE_HEIGHT, body_lengths, lengths_to_body, tpose_on_floor
+from ..body import DEFAULT_ANKLE_HEIGHT, body_lengths, lengths_to_body, tpose_on_floor
 from .take_model import (ANKLES, DEFAULT_POINT_OFFSETS, PER_FRAME, TORSO_PAIRS, TakeData, TakeProblem, Weights,
                          bone_directions, fronts, pack_initial, point_positions, unit, levenberg_marquardt)
 from .take_model import search_sides_lm as search_sides

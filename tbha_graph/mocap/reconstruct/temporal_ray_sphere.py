@@ -44,7 +44,7 @@ from ..camera import Camera
 from ..lowpass import butterworth_lowpass
 from ..ports import CAMERA, MOTION, TRACKS2D
 from ..skeleton import JOINT_INDEX, JOINT_NAMES, N_JOINTS, PARENTS
-from .body import body_lengths, tpose_on_floor
+from ..body import body_lengths, tpose_on_floor
 from .ray_sphere import bone_between, check_image_size, motion_bundle, ray_directions
 
 TORSO = tuple(JOINT_INDEX[n] for n in ("hips", "chest", "neck", "left_shoulder", "right_shoulder", "left_hip", "right_hip"))

@@ -29,7 +29,7 @@ confidence, as it does for parts it did not find. World landmarks get ``noise_m`
 
 CLI (writes the bundled set in ``data/keypoints/``)::
 
-    python -m tbha_graph.mocap.io.keypoints_synth data/mocap/cmu/131_02.bvh data/keypoints/cmu131_02 --duration 3
+    python -m tbha_graph.mocap.synth.keypoints data/mocap/cmu/131_02.bvh data/keypoints/cmu131_02 --duration 3
 """
 from __future__ import annotations
 
@@ -43,7 +43,7 @@ import numpy as np
 from ...core.atomic import atomic_path, atomic_write_text
 from ..camera import Camera
 from ..skeleton import JOINT_INDEX, JOINT_NAMES
-from .keypoint_layouts import MEDIAPIPE_POSE, OPENPOSE_BODY25, OPENPOSE_COCO18, Layout
+from ..io.keypoint_layouts import MEDIAPIPE_POSE, OPENPOSE_BODY25, OPENPOSE_COCO18, Layout
 
 #: OpenPose part -> MediaPipe landmark (or helper point) it is written from.
 _OPENPOSE_FROM = {
@@ -174,7 +174,7 @@ def synthesize_keypoints(bvh_path: str | Path, out_dir: str | Path, options: Syn
                          name: str | None = None, formats: tuple[str, ...] = ("mediapipe_json", "mediapipe_csv", "openpose")) -> dict[str, Path]:
     """Write detector keypoint files for a CMU clip (see the module docstring); returns the written paths
     by kind (``mediapipe_json``, ``mediapipe_csv``, ``openpose`` (folder), ``ground_truth``)."""
-    from ..synth.tpose_lead_in import LeadInParams, lead_in_motion
+    from .tpose_lead_in import LeadInParams, lead_in_motion
 
     o = options or SynthOptions()
     out = Path(out_dir)
@@ -248,7 +248,7 @@ def synthesize_keypoints(bvh_path: str | Path, out_dir: str | Path, options: Syn
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(allow_abbrev=False, prog="python -m tbha_graph.mocap.io.keypoints_synth",
+    ap = argparse.ArgumentParser(allow_abbrev=False, prog="python -m tbha_graph.mocap.synth.keypoints",
                                  description="Write MediaPipe/OpenPose keypoint files and ground truth from a CMU BVH clip.")
     ap.add_argument("bvh", help="BVH clip (CMU skeleton)")
     ap.add_argument("out_dir", help="folder to write into")

@@ -9,8 +9,8 @@ from typing import Mapping
 
 import numpy as np
 
-from ...core.errors import NodeError, did_you_mean
-from ..skeleton import JOINT_INDEX, JOINT_NAMES, N_JOINTS, bone_lengths_array, tpose
+from ..core.errors import NodeError, did_you_mean
+from .skeleton import JOINT_INDEX, JOINT_NAMES, N_JOINTS, bone_lengths_array, tpose
 
 #: Bone names (child joints), in joint order.
 BONE_NAMES: tuple[str, ...] = JOINT_NAMES[1:]
