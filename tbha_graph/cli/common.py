@@ -5,14 +5,14 @@ import os
 import sys
 from typing import Any, Callable
 
-from ..core.errors import NodeFailed, PipelineErrors, TbhaError
-
 EXIT_OK, EXIT_FAILED, EXIT_USER = 0, 1, 2
 
 
 def guarded(fn: Callable[[], int]) -> int:
     """Run a CLI body; user errors print as messages (exit 2), node failures exit 1, ^C exits 130. A reader
     that stops early (``tbha-graph schema | head``) ends the output quietly, as for any Unix tool."""
+    from ..core.errors import NodeFailed, PipelineErrors, TbhaError  # here: `--help` never gets this far
+
     try:
         return _quiet_on_broken_pipe(fn)
     except PipelineErrors as e:

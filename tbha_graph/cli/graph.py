@@ -18,14 +18,13 @@ import sys
 import textwrap
 from pathlib import Path
 
-from ..core.cache import Cache
-from ..core.progress import Reporter
-from ..core.registry import default_registry, load_plugin_modules
-from ..core.runner import load_graph
+# the framework is imported inside the commands, so that `tbha-graph --help` starts fast
 from .common import EXIT_FAILED, EXIT_OK, add_run_arguments, guarded, parse_assignments
 
 
 def _registry(args):
+    from ..core.registry import default_registry, load_plugin_modules
+
     reg = default_registry()
     if getattr(args, "plugin", None):
         load_plugin_modules(args.plugin, reg)
@@ -140,6 +139,8 @@ def describe_node(spec) -> str:
 
 
 def cmd_validate(args) -> int:
+    from ..core.runner import load_graph
+
     reg = _registry(args)
     status = EXIT_OK
     for path in args.files:
@@ -158,6 +159,7 @@ def cmd_validate(args) -> int:
 
 def cmd_show(args) -> int:
     from ..core import show
+    from ..core.runner import load_graph
 
     if not Path(args.file).exists():
         reg = _registry(args)
@@ -189,6 +191,8 @@ def cmd_schema(args) -> int:
 
 
 def cmd_study(args) -> int:
+    from ..core.cache import Cache
+    from ..core.progress import Reporter
     from ..core.study import run_study, to_markdown
 
     _registry(args)
@@ -203,6 +207,8 @@ def cmd_study(args) -> int:
 
 def cmd_batch(args) -> int:
     from ..core.batch import collect_takes, run_batch
+    from ..core.cache import Cache
+    from ..core.progress import Reporter
     from ..core.study import to_markdown
 
     _registry(args)
@@ -221,6 +227,8 @@ def cmd_batch(args) -> int:
 
 
 def cmd_cache(args) -> int:
+    from ..core.cache import Cache
+
     cache = Cache(args.cache_dir) if args.cache_dir else Cache()
     if args.action == "info":
         info = cache.info()

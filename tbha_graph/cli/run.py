@@ -6,15 +6,16 @@ import sys
 import textwrap
 from pathlib import Path
 
-from ..core.cache import Cache
-from ..core.errors import NodeFailed
-from ..core.progress import Reporter, fmt_value
-from ..core.registry import default_registry, load_plugin_modules
-from ..core.runner import load_graph, run_graph
 from .common import EXIT_FAILED, EXIT_OK, add_run_arguments, guarded, parse_assignments
 
 
 def run_command(args: argparse.Namespace) -> int:
+    from ..core.cache import Cache
+    from ..core.errors import NodeFailed
+    from ..core.progress import Reporter
+    from ..core.registry import default_registry, load_plugin_modules
+    from ..core.runner import load_graph, run_graph
+
     reporter = Reporter(quiet=args.quiet)
     reg = default_registry()
     if args.plugin:
@@ -46,6 +47,8 @@ HEADLINE = ("tracked_pct", "reprojection_px_median", "mpjpe_mm", "pa_mpjpe_mm", 
 def print_summary(run, out_dir: Path, verbose: bool = False) -> None:
     """At most 15 lines (more with ``verbose``): what ran, the verdict and its reasons, the headline
     figures of a ``metrics.json`` output, the warnings, where the outputs are."""
+    from ..core.progress import fmt_value
+
     ran = sum(r.status == "ran" for r in run.results.values())
     cached = sum(r.status == "cached" for r in run.results.values())
     print(f"\ndone in {run.seconds:.2f} s: {ran} node(s) ran, {cached} from cache")

@@ -7,17 +7,20 @@ and a did-you-mean suggestion where a name is misspelled.
 """
 from __future__ import annotations
 
+import heapq
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import networkx as nx
 from pydantic import BaseModel, ValidationError
 
 from .errors import Location, PipelineError, PipelineErrors, RegistryError, did_you_mean
 from .node import NodeSpec, is_input_path_field
 from .registry import Registry, default_registry
 from .spec import NodeDecl, PipelineDecl, Value
+
+if TYPE_CHECKING:
+    import networkx as nx
 
 
 @dataclass
@@ -54,7 +57,9 @@ class Graph:
             stack.extend(src for src, _ in self.nodes[n].inputs.values())
         return [n for n in self.order if n in need]
 
-    def to_networkx(self) -> nx.DiGraph:
+    def to_networkx(self) -> "nx.DiGraph":
+        import networkx as nx
+
         g = nx.DiGraph()
         for n in self.order:
             g.add_node(n, type=self.nodes[n].spec.type)
@@ -62,6 +67,39 @@ class Graph:
             for port, (src, sport) in b.inputs.items():
                 g.add_edge(src, n, label=f"{sport}->{port}")
         return g
+
+
+def topological_order(nodes: list[str], deps: dict[str, list[str]]) -> tuple[list[str], list[str]]:
+    """``(order, cycle)``: the nodes in topological order, ties broken by name (the smallest ready node
+    first, so the order does not depend on declaration order), and ``[]``; or, when the dependencies
+    (node -> the nodes it reads) have a cycle, ``([], the nodes of one cycle in order)``."""
+    users: dict[str, list[str]] = {n: [] for n in nodes}
+    missing = {n: 0 for n in nodes}
+    for n in nodes:
+        for d in set(deps.get(n, ())):
+            users[d].append(n)
+            missing[n] += 1
+    ready = [n for n in nodes if not missing[n]]
+    heapq.heapify(ready)
+    order: list[str] = []
+    while ready:
+        n = heapq.heappop(ready)
+        order.append(n)
+        for u in users[n]:
+            missing[u] -= 1
+            if not missing[u]:
+                heapq.heappush(ready, u)
+    if len(order) == len(nodes):
+        return order, []
+    # a cycle: walk backwards along unfinished dependencies until a node repeats
+    left = {n for n in nodes if missing[n]}
+    n, seen, path = min(left), {}, []
+    while n not in seen:
+        seen[n] = len(path)
+        path.append(n)
+        n = min(d for d in deps[n] if d in left)
+    cycle = path[seen[n]:]
+    return [], cycle[::-1]
 
 
 def _split_ref(ref: Any) -> tuple[str, str] | None:
@@ -247,19 +285,11 @@ def build_graph(decl: PipelineDecl, registry: Registry | None = None) -> Graph:
             continue
         outputs[name] = (src, sport)
 
-    g = nx.DiGraph()
-    g.add_nodes_from(decl.nodes)
-    for nid, ins in wiring.items():
-        for src, _ in ins.values():
-            g.add_edge(src, nid)
-    order: list[str] = []
-    try:
-        order = list(nx.lexicographical_topological_sort(g)) if len(g) < 2000 else list(nx.topological_sort(g))
-    except nx.NetworkXUnfeasible:
-        cycle = nx.find_cycle(g)
-        path = " -> ".join([a for a, _ in cycle] + [cycle[0][0]])
-        first = decl.nodes[cycle[0][1]]
-        errors.append(PipelineError(f"the pipeline has a cycle: {path}", location=first.loc, node=cycle[0][1], hint="a node cannot depend on its own output; remove one of these connections"))
+    order, cycle = topological_order(list(decl.nodes), {nid: [src for src, _ in ins.values()] for nid, ins in wiring.items()})
+    if cycle:
+        path = " -> ".join(cycle + [cycle[0]])
+        first = decl.nodes[cycle[1 % len(cycle)]]
+        errors.append(PipelineError(f"the pipeline has a cycle: {path}", location=first.loc, node=first.id, hint="a node cannot depend on its own output; remove one of these connections"))
 
     if errors:
         raise PipelineErrors(errors)
