@@ -1,7 +1,13 @@
-"""Scheduler overhead per node: a chain of 1,000 trivial nodes, cache disabled and fully cached.
+"""Scheduler overhead per node: a chain of trivial nodes, built and checked, run with the cache disabled
+and fully cached.
 
-Prints ``chain_us_per_node=`` (cache off) and ``cache_hit_us_per_node=`` (every node a cache hit),
-medians of several repetitions. Run: ``python bench/framework_overhead.py [--nodes 1000 --repeat 7]``.
+Prints, for each chain length, ``build_and_check_us_per_node=``, ``chain_us_per_node=`` (cache off) and
+``cache_hit_us_per_node=`` (every node a cache hit): medians of ``--repeat`` repetitions of wall time,
+and the same as process CPU time (``*_cpu_us_per_node``, less disturbed by other processes on a shared
+machine). With several lengths (``--nodes 1000,10000``) it also prints ``linearity_<figure>=`` (per-node
+cost at the longest chain over that at the shortest; 1.0 is linear). The first chain length's lines are
+also printed without a suffix (the acceptance figures). Run:
+``python bench/framework_overhead.py [--nodes 1000,10000 --repeat 7]``.
 """
 from __future__ import annotations
 
@@ -47,35 +53,55 @@ def chain(n: int):
     return p.build()
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(allow_abbrev=False)
-    ap.add_argument("--nodes", type=int, default=1000)
-    ap.add_argument("--repeat", type=int, default=7)
-    a = ap.parse_args()
-    t0 = time.perf_counter()
-    g = chain(a.nodes)
-    build_us = (time.perf_counter() - t0) / a.nodes * 1e6
-    nocache = []
-    for _ in range(a.repeat):
-        t = time.perf_counter()
-        run_graph(g, cache=False)
-        nocache.append((time.perf_counter() - t) / a.nodes * 1e6)
+def timed(fn, n: int, repeat: int) -> tuple[float, float]:
+    """Median wall and CPU microseconds per node of ``fn()`` over ``repeat`` calls."""
+    wall, cpu = [], []
+    for _ in range(repeat):
+        t, c = time.perf_counter(), time.process_time()
+        fn()
+        wall.append((time.perf_counter() - t) / n * 1e6)
+        cpu.append((time.process_time() - c) / n * 1e6)
+    return statistics.median(wall), statistics.median(cpu)
+
+
+def measure(n: int, repeat: int) -> dict[str, float]:
+    out: dict[str, float] = {}
+    chain(min(n, 100))  # warm (imports, pydantic schemas)
+    out["build_and_check"], out["build_and_check_cpu"] = timed(lambda: chain(n), n, max(3, repeat // 2))
+    g = chain(n)
+    out["chain"], out["chain_cpu"] = timed(lambda: run_graph(g, cache=False), n, repeat)
     with tempfile.TemporaryDirectory() as d:
         cache = Cache(Path(d))
         t = time.perf_counter()
         run_graph(g, cache=cache)
-        cold = (time.perf_counter() - t) / a.nodes * 1e6
-        hits = []
-        for _ in range(a.repeat):
-            t = time.perf_counter()
+        out["cache_cold"] = (time.perf_counter() - t) / n * 1e6
+
+        def hit():
             r = run_graph(g, cache=cache)
-            hits.append((time.perf_counter() - t) / a.nodes * 1e6)
             assert all(x.status == "cached" for x in r.results.values())
-    print(f"nodes={a.nodes}")
-    print(f"build_and_check_us_per_node={build_us:.1f}")
-    print(f"chain_us_per_node={statistics.median(nocache):.1f}")
-    print(f"cache_cold_us_per_node={cold:.1f}")
-    print(f"cache_hit_us_per_node={statistics.median(hits):.1f}")
+
+        out["cache_hit"], out["cache_hit_cpu"] = timed(hit, n, repeat)
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(allow_abbrev=False)
+    ap.add_argument("--nodes", default="1000", help="chain length(s), comma-separated (e.g. 1000,10000)")
+    ap.add_argument("--repeat", type=int, default=7)
+    a = ap.parse_args()
+    sizes = [int(x) for x in a.nodes.split(",")]
+    results = {n: measure(n, a.repeat if n <= 2000 else max(3, a.repeat // 2)) for n in sizes}
+    first = results[sizes[0]]
+    print(f"nodes={sizes[0]}")
+    for k, v in first.items():
+        print(f"{k}_us_per_node={v:.1f}")
+    if len(sizes) > 1:
+        for n in sizes[1:]:
+            for k, v in results[n].items():
+                print(f"{k}_us_per_node_at_{n}={v:.1f}")
+        last = results[sizes[-1]]
+        for k in ("build_and_check", "chain", "cache_hit", "build_and_check_cpu", "chain_cpu", "cache_hit_cpu"):
+            print(f"linearity_{k}={last[k] / first[k]:.2f}")
 
 
 if __name__ == "__main__":

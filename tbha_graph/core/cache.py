@@ -41,6 +41,8 @@ class Entry:
     key: str
     path: str | Path
     meta: dict
+    #: when meta.json was last modified (the entry last used), seconds since the epoch
+    used: float = 0.0
 
     def fingerprint(self, port: str) -> str:
         return self.meta["outputs"][port]["fingerprint"]
@@ -134,6 +136,7 @@ class Cache:
         try:
             with open(os.path.join(d, "meta.json"), "rb") as f:
                 raw = f.read()
+                used = os.fstat(f.fileno()).st_mtime
         except FileNotFoundError:
             return None
         except OSError as e:
@@ -142,7 +145,7 @@ class Cache:
             meta = json.loads(raw)
         except ValueError:
             raise CorruptEntry(f"cache entry {key[:12]}: meta.json is not valid JSON") from None
-        return Entry(key, d, meta)
+        return Entry(key, d, meta, used)
 
     def remove(self, key: str) -> None:
         """Remove an entry (rename away first, so readers never see it half-deleted)."""
@@ -265,8 +268,14 @@ class Cache:
                 removed += 1
         return {"removed_entries": removed, "removed_tmp": removed_tmp, "bytes_left": total}
 
-    def touch(self, entry: Entry) -> None:
-        """Mark an entry as used (for ``gc``'s least-recently-used order): its meta.json's mtime."""
+    #: a hit re-marks an entry only when its mark is older than this (gc's granularity), seconds
+    TOUCH_AFTER_S = 60.0
+
+    def touch(self, entry: Entry, now: float | None = None) -> None:
+        """Mark an entry as used (for ``gc``'s least-recently-used order): its meta.json's mtime (left
+        alone when it is younger than :attr:`TOUCH_AFTER_S`, to keep a cache hit cheap)."""
+        if entry.used and (now if now is not None else time.time()) - entry.used < self.TOUCH_AFTER_S:
+            return
         try:
             os.utime(os.path.join(entry.path, "meta.json"))
         except OSError:

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 from pydantic import BaseModel, ValidationError
 
 from .errors import Location, PipelineError, PipelineErrors, RegistryError, did_you_mean
-from .node import NodeSpec, is_input_path_field
+from .node import NodeSpec, input_path_fields
 from .registry import Registry, default_registry
 from .spec import NodeDecl, PipelineDecl, Value
 
@@ -111,11 +111,13 @@ def _split_ref(ref: Any) -> tuple[str, str] | None:
 
 def _resolve_paths(spec: NodeSpec, raw: dict[str, Value]) -> dict[str, Any]:
     """Param values; relative InputPath params resolved against the folder they were written in."""
+    paths = input_path_fields(spec.params)
+    if not paths:
+        return {k: v.value for k, v in raw.items()}
     out: dict[str, Any] = {}
     for k, v in raw.items():
-        fld = spec.params.model_fields.get(k)
         value = v.value
-        if fld is not None and value is not None and isinstance(value, str) and is_input_path_field(fld.annotation, fld.metadata):
+        if k in paths and value is not None and isinstance(value, str):
             p = Path(value).expanduser()
             try:
                 value = str(p if p.is_absolute() else (v.base_dir / p).resolve())
@@ -159,9 +161,9 @@ def _check_params(decl: NodeDecl, spec: NodeSpec, errors: list[PipelineError]) -
                 )
             )
         return None
-    for k, fld in fields.items():
+    for k in input_path_fields(spec.params):
         val = getattr(params, k)
-        if val is not None and is_input_path_field(fld.annotation, fld.metadata) and not Path(val).exists():
+        if val is not None and not Path(val).exists():
             where = decl.params[k].loc if k in decl.params else decl.loc
             errors.append(
                 PipelineError(

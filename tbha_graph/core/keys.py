@@ -30,7 +30,7 @@ from typing import Any, Callable, Protocol
 from pydantic import BaseModel
 
 from .errors import CacheError
-from .node import NodeSpec, is_input_path_field
+from .node import NodeSpec, input_path_fields
 from .types import hash_json
 
 CACHE_FORMAT = 2
@@ -58,12 +58,30 @@ def _strip_docstrings(tree: ast.AST) -> ast.AST:
     return tree
 
 
+def _is_type_checking(test: ast.expr) -> bool:
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
+
+
+def _walk_run(tree: ast.AST):
+    """Every node of the tree except the bodies of ``if TYPE_CHECKING:`` (imports that never run)."""
+    todo = [tree]
+    while todo:
+        n = todo.pop()
+        yield n
+        if isinstance(n, ast.If) and _is_type_checking(n.test):
+            todo.extend(n.orelse)
+            continue
+        todo.extend(ast.iter_child_nodes(n))
+
+
 def _imports(tree: ast.AST, module: str, is_package: bool) -> list[str]:
-    """Absolute names of everything ``import``-ed anywhere in the module (functions included); for
+    """Absolute names of everything ``import``-ed anywhere in the module (functions included, ``if
+    TYPE_CHECKING:`` blocks not: they never run); for
     ``from a import b`` both ``a`` and ``a.b`` (``b`` may be a submodule; non-modules are dropped later)."""
     package = module if is_package else module.rpartition(".")[0]
     found: set[str] = set()
-    for n in ast.walk(tree):
+    for n in _walk_run(tree):
         if isinstance(n, ast.Import):
             found.update(a.name for a in n.names)
         elif isinstance(n, ast.ImportFrom):
@@ -97,24 +115,23 @@ def source_fingerprint(source: str | bytes, module: str = "<module>", is_package
 # ---------------------------------------------------------------------------------------------
 # a module's closure
 # ---------------------------------------------------------------------------------------------
-def _top_dirs(top: str) -> list[Path]:
+def _top_dirs(top: str) -> list[str]:
     mod = sys.modules.get(top)
     paths = list(getattr(mod, "__path__", []) or []) if mod is not None else []
     if not paths and mod is None:
         spec = importlib.util.find_spec(top)  # a top-level name: imports nothing
         if spec is not None and spec.submodule_search_locations:
             paths = list(spec.submodule_search_locations)
-    return [Path(p) for p in paths]
+    return [str(p) for p in paths]
 
 
-def module_file(name: str) -> tuple[Path, bool] | None:
+def module_file(name: str) -> tuple[str, bool] | None:
     """``(source file, is a package)`` of module ``name``, found without importing it; None when it has
     no source file (a builtin, an extension, a name that is not a module)."""
     mod = sys.modules.get(name)
     f = getattr(mod, "__file__", None) if mod is not None else None
     if f:
-        p = Path(f)
-        return (p, p.name == "__init__.py") if p.suffix == ".py" else None
+        return (f, os.path.basename(f) == "__init__.py") if f.endswith(".py") else None
     top, _, rest = name.partition(".")
     if not rest:
         if name == "__main__":
@@ -122,14 +139,19 @@ def module_file(name: str) -> tuple[Path, bool] | None:
         spec = importlib.util.find_spec(name) if mod is None else None
         if spec is None or not spec.origin or not spec.origin.endswith(".py"):
             return None
-        return Path(spec.origin), spec.submodule_search_locations is not None
+        return spec.origin, spec.submodule_search_locations is not None
     for d in _top_dirs(top):
-        base = d.joinpath(*rest.split("."))
-        if (base / "__init__.py").is_file():
-            return base / "__init__.py", True
-        if base.with_suffix(".py").is_file():
-            return base.with_suffix(".py"), False
+        base = os.path.join(d, *rest.split("."))
+        init = os.path.join(base, "__init__.py")
+        if os.path.isfile(init):
+            return init, True
+        if os.path.isfile(base + ".py"):
+            return base + ".py", False
     return None
+
+
+#: this process's records: (module, file) -> (size, mtime_ns, fingerprint, imports); checked by stat
+_records: dict[tuple[str, str], tuple[int, int, str, list[str]]] = {}
 
 
 def _module_record(name: str, memo: Memo | None) -> tuple[str, list[str]] | None:
@@ -137,14 +159,20 @@ def _module_record(name: str, memo: Memo | None) -> tuple[str, list[str]] | None
     if found is None:
         return None
     path, is_package = found
-    st = path.stat()
+    st = os.stat(path)
+    mine = _records.get((name, path))
+    if mine is not None and mine[0] == st.st_size and mine[1] == st.st_mtime_ns:
+        return mine[2], mine[3]
     key = f"{path}::{name}"  # the same file can be two modules (__main__ and its import name)
     hit = memo.get(key, st) if memo is not None else None
     if isinstance(hit, list) and len(hit) == 2:
-        return hit[0], list(hit[1])
-    fp, imports = source_fingerprint(path.read_bytes(), name, is_package)
-    if memo is not None:
-        memo.put(key, st, [fp, imports], save=False)
+        fp, imports = hit[0], list(hit[1])
+    else:
+        with open(path, "rb") as fh:
+            fp, imports = source_fingerprint(fh.read(), name, is_package)
+        if memo is not None:
+            memo.put(key, st, [fp, imports], save=False)
+    _records[(name, path)] = (st.st_size, st.st_mtime_ns, fp, imports)
     return fp, imports
 
 
@@ -192,17 +220,6 @@ def code_fingerprint(spec: NodeSpec, memo: Memo | None = None) -> str:
 # ---------------------------------------------------------------------------------------------
 # params
 # ---------------------------------------------------------------------------------------------
-_file_fields: dict[type, tuple[str, ...]] = {}
-
-
-def _input_path_fields(model: type[BaseModel]) -> tuple[str, ...]:
-    names = _file_fields.get(model)
-    if names is None:
-        names = tuple(n for n, f in model.model_fields.items() if is_input_path_field(f.annotation, f.metadata))
-        _file_fields[model] = names
-    return names
-
-
 def _default_file_hash(p: Path) -> str:
     from .filehash import file_content_hash
 
@@ -219,7 +236,7 @@ def canonical_params(params: BaseModel, file_hash: Callable[[Path], str] | None 
     fh = file_hash or _default_file_hash
     eff = getattr(params, "effective", None) if effective else None
     data = eff() if callable(eff) else params.model_dump(mode="json")
-    for name in _input_path_fields(type(params)):
+    for name in input_path_fields(type(params)):
         value = getattr(params, name)
         if value is None:
             continue

@@ -57,6 +57,18 @@ def is_input_path_field(annotation: Any, metadata: Iterable[Any] = ()) -> bool:
     return any(a is FILE_CONTENT or is_input_path_field(a) for a in get_args(annotation))
 
 
+_path_fields: dict[type, tuple[str, ...]] = {}
+
+
+def input_path_fields(model: type[BaseModel]) -> tuple[str, ...]:
+    """Names of the :data:`InputPath` fields of a params model (memoised per class)."""
+    names = _path_fields.get(model)
+    if names is None:
+        names = tuple(n for n, f in model.model_fields.items() if is_input_path_field(f.annotation, f.metadata))
+        _path_fields[model] = names
+    return names
+
+
 class NoParams(BaseModel):
     """A node without parameters."""
 
@@ -169,7 +181,7 @@ class Context:
       run summary, and added to the run's report output (see :mod:`tbha_graph.core.rundir`).
     """
 
-    def __init__(self, node_id: str, params: BaseModel, work_dir: Path | None = None, reporter: Any = None):
+    def __init__(self, node_id: str, params: BaseModel, work_dir: Path | str | None = None, reporter: Any = None):
         self.node_id = node_id
         self.params = params
         self._work_dir = work_dir
@@ -180,6 +192,7 @@ class Context:
     def work_dir(self) -> Path:
         if self._work_dir is None:
             self._work_dir = Path(tempfile.mkdtemp(prefix=f"tbha-{self.node_id}-"))
+        self._work_dir = Path(self._work_dir)
         self._work_dir.mkdir(parents=True, exist_ok=True)
         return self._work_dir
 

@@ -10,6 +10,7 @@
 """
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -28,15 +29,22 @@ class Pipeline:
     def __init__(self, description: str = "", registry: Registry | None = None):
         self.decl = PipelineDecl(path="<python>", description=description)
         self.registry = registry
+        self._cwd_str, self._cwd_path = "", Path()
 
     def _loc(self) -> Location:
         frame = sys._getframe(2)  # the caller of add()/output(); inspect.stack() is far too slow
         return Location(frame.f_code.co_filename, frame.f_lineno, 0)
 
+    def _cwd(self) -> Path:
+        cwd = os.getcwd()  # one Path per folder, not per node (building a 10,000-node pipeline)
+        if cwd != self._cwd_str:
+            self._cwd_str, self._cwd_path = cwd, Path(cwd)
+        return self._cwd_path
+
     def add(self, node_id: str, node: str | NodeSpec, params: dict[str, Any] | None = None, **inputs: str) -> "Pipeline":
         """Add node ``node_id`` of type ``node`` (a registered type name or a NodeSpec)."""
         loc = self._loc()
-        base = Path.cwd()
+        base = self._cwd()
         if node_id in self.decl.nodes:
             raise ValueError(f"node id '{node_id}' is used twice")
         self.decl.nodes[node_id] = NodeDecl(
@@ -51,7 +59,7 @@ class Pipeline:
 
     def output(self, name: str, ref: str) -> "Pipeline":
         """Name an output (a file name in the run directory) for ``"<node id>.<port>"``."""
-        self.decl.outputs[name] = Value(ref, self._loc(), Path.cwd())
+        self.decl.outputs[name] = Value(ref, self._loc(), self._cwd())
         return self
 
     def build(self) -> Graph:

@@ -23,6 +23,8 @@ class Reporter:
             print(text, file=self.stream, flush=True)
 
     def node_done(self, node_id: str, type_name: str, status: str, seconds: float, note: str = "") -> None:
+        if self.quiet:  # the scheduler calls this once per node: format nothing when nothing is printed
+            return
         self._print(f"  {status:<7} {node_id:<22} {type_name:<30} {seconds:8.2f} s{('  ' + note) if note else ''}")
 
     def warn(self, text: str) -> None:

@@ -8,6 +8,7 @@ against the declared port types and store them atomically.
 """
 from __future__ import annotations
 
+import os
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -115,7 +116,7 @@ def execute_node(
         args.setdefault(port, None)
     work_dir = None
     if work_root is not None:
-        work_dir = work_root / f"{bound.id}-{time.monotonic_ns()}"
+        work_dir = os.path.join(work_root, f"{bound.id}-{time.monotonic_ns()}")  # a Path only when used
     ctx = Context(bound.id, bound.params, work_dir=work_dir, reporter=reporter)
     try:
         with using_cache_dir(cache.root if cache is not None else None):  # file-hash memo of this run's cache

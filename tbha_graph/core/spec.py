@@ -65,7 +65,22 @@ class PipelineDecl:
     files: list[str] = field(default_factory=list)
 
     def copy(self) -> "PipelineDecl":
-        return copy.deepcopy(self)
+        """An independent copy (what checking and overriding change); node types are shared, values
+        that are lists or dicts are copied deeply, the rest (str, numbers, locations) is immutable."""
+        return PipelineDecl(
+            path=self.path,
+            description=self.description,
+            nodes={k: NodeDecl(n.id, n.type, n.loc, n.type_loc, _copy_values(n.params), _copy_values(n.inputs))
+                   for k, n in self.nodes.items()},
+            outputs=_copy_values(self.outputs),
+            vars=_copy_values(self.vars),
+            files=list(self.files),
+        )
+
+
+def _copy_values(values: dict[str, Value]) -> dict[str, Value]:
+    return {k: Value(copy.deepcopy(v.value) if isinstance(v.value, (list, dict)) else v.value, v.loc, v.base_dir)
+            for k, v in values.items()}
 
 
 # ---------------------------------------------------------------------------------------------

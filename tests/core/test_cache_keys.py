@@ -132,8 +132,11 @@ def test_project_constants_of_mocap_nodes_are_in_their_closure():
     from tbha_graph.mocap.reconstruct import solve_take
     from tbha_graph.mocap.smpl import from_rotations
 
-    assert "tbha_graph.mocap.skeleton" in module_closure(solve_take.__name__)
+    closure = module_closure(solve_take.__name__)
+    assert "tbha_graph.mocap.skeleton" in closure and "tbha_graph.core.types" in closure  # stores its outputs
     assert "tbha_graph.mocap.smpl.kintree" in module_closure(from_rotations.__name__)
+    # the scheduler runs the node but does not shape its result: `if TYPE_CHECKING:` imports never run
+    assert "tbha_graph.core.scheduler" not in closure and "tbha_graph.core.pipeline" not in closure
 
 
 # ---------------------------------------------------------------------------------------------

@@ -8,7 +8,6 @@ length and the shoulder triangle rigid, so the result is a valid input for the w
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
 
 from ..skeleton import JOINT_INDEX, N_JOINTS, PARENTS, TPOSE_DIRECTIONS, TRIANGLE_JOINTS
 from .ray_sphere import EXPANSION
@@ -39,6 +38,8 @@ def tpose_lead_in(joints: np.ndarray, hold: int = 30, blend: int = 90) -> np.nda
     :data:`~tbha_graph.mocap.skeleton.TPOSE_DIRECTIONS`, and stands at the first frame's chest position.
     All bone lengths and the triangle are those of the first frame.
     """
+    from scipy.spatial.transform import Rotation, Slerp  # imported where it is used
+
     joints = np.asarray(joints, dtype=np.float64)
     first = joints[0]
     chest = JOINT_INDEX["chest"]

@@ -34,7 +34,6 @@ from __future__ import annotations
 import cv2
 import numpy as np
 from pydantic import Field
-from scipy.optimize import linear_sum_assignment
 
 from ...core.errors import NodeError
 from ...core.node import node
@@ -133,6 +132,8 @@ class KalmanTracker:
     def step(self, candidates: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         """One frame: ``candidates[c]`` (k, 2) px or (k, 3) px, px² (with the blob areas) of class ``c``;
         returns ``points`` (16, 2) px and ``tracked`` (16,); sets ``doubt``."""
+        from scipy.optimize import linear_sum_assignment  # 0.5 s to import: only when a take is tracked
+
         p = self.p
         body = self.body
         kf_pred = np.empty((N_JOINTS, 2))
