@@ -30,6 +30,9 @@ from .types import AnyOf, AnyType, File, Model, PortType, concrete_type_of, hash
 __all__ = ["Cache", "CorruptEntry", "Entry", "default_cache_dir"]
 
 
+_O_READ = os.O_RDONLY | getattr(os, "O_BINARY", 0)
+
+
 class CorruptEntry(CacheError):
     """A cache entry failed its checksum or could not be parsed."""
 
@@ -132,15 +135,26 @@ class Cache:
     # --- reading ------------------------------------------------------------------------------
     def lookup(self, key: str) -> Entry | None:
         """The complete entry for ``key``, or None. An unreadable meta.json counts as corrupt."""
-        d = os.path.join(self._entries_str, key[:2], key)  # plain strings: this is the cache-hit hot path
+        d = f"{self._entries_str}{os.sep}{key[:2]}{os.sep}{key}"  # plain strings and fds: the cache-hit hot path
         try:
-            with open(os.path.join(d, "meta.json"), "rb") as f:
-                raw = f.read()
-                used = os.fstat(f.fileno()).st_mtime
+            fd = os.open(f"{d}{os.sep}meta.json", _O_READ)
         except FileNotFoundError:
             return None
         except OSError as e:
+            raise CorruptEntry(f"cache entry {key[:12]}: cannot open meta.json: {e}") from None
+        try:
+            st = os.fstat(fd)
+            raw = os.read(fd, st.st_size + 1)
+            while len(raw) < st.st_size:  # a short read (never for a small local file): read the rest
+                more = os.read(fd, st.st_size + 1 - len(raw))
+                if not more:
+                    break
+                raw += more
+            used = st.st_mtime
+        except OSError as e:
             raise CorruptEntry(f"cache entry {key[:12]}: cannot read meta.json: {e}") from None
+        finally:
+            os.close(fd)
         try:
             meta = json.loads(raw)
         except ValueError:

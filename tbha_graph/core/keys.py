@@ -22,6 +22,7 @@ import ast
 import hashlib
 import importlib.util
 import inspect
+import json
 import os
 import sys
 from pathlib import Path
@@ -226,6 +227,17 @@ def _default_file_hash(p: Path) -> str:
     return file_content_hash(p)
 
 
+_effective: dict[type, Callable[[BaseModel], dict] | None] = {}
+
+
+def _effective_of(model: type) -> Callable[[BaseModel], dict] | None:
+    """The model class's ``effective`` method or None (memoised: a failing getattr on a model is slow)."""
+    if model not in _effective:
+        fn = getattr(model, "effective", None)
+        _effective[model] = fn if callable(fn) else None
+    return _effective[model]
+
+
 def canonical_params(params: BaseModel, file_hash: Callable[[Path], str] | None = None, effective: bool = True) -> dict[str, Any]:
     """The params as canonical JSON: every param, defaults included, input-file params as
     ``{path, sha256 of content}``.
@@ -234,8 +246,8 @@ def canonical_params(params: BaseModel, file_hash: Callable[[Path], str] | None 
     more than the plain values, e.g. a preset filled in unless a param is set explicitly), that dict,
     which must hold exactly what the node's result depends on, replaces the plain values."""
     fh = file_hash or _default_file_hash
-    eff = getattr(params, "effective", None) if effective else None
-    data = eff() if callable(eff) else params.model_dump(mode="json")
+    eff = _effective_of(type(params)) if effective else None
+    data = eff(params) if eff is not None else params.model_dump(mode="json")
     for name in input_path_fields(type(params)):
         value = getattr(params, name)
         if value is None:
@@ -253,14 +265,19 @@ def canonical_params(params: BaseModel, file_hash: Callable[[Path], str] | None 
 
 def node_key(spec: NodeSpec, params: BaseModel, input_fingerprints: dict[str, str | None],
              file_hash: Callable[[Path], str] | None = None, code_memo: Memo | None = None) -> str:
-    """The cache key of one node evaluation."""
-    return hash_json(
-        {
-            "format": CACHE_FORMAT,
-            "type": spec.type,
-            "version": spec.version,
-            "code": code_fingerprint(spec, code_memo),
-            "params": canonical_params(params, file_hash),
-            "inputs": input_fingerprints,
-        }
-    )
+    """The cache key of one node evaluation: SHA-256 of one canonical JSON value per line (format, type,
+    version, code fingerprint, params, input fingerprints; JSON strings hold no raw newline)."""
+    code = spec.__dict__.get("_code_fingerprint") or code_fingerprint(spec, code_memo)
+    text = "\n".join((
+        _HEADER,
+        _dumps(spec.type),
+        _dumps(spec.version),
+        code,
+        _dumps(canonical_params(params, file_hash)),
+        _dumps(input_fingerprints),
+    ))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+_HEADER = f"tbha-graph cache key, format {CACHE_FORMAT}"
+_dumps = json.JSONEncoder(sort_keys=True, separators=(",", ":"), ensure_ascii=False, allow_nan=True).encode

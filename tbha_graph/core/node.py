@@ -22,6 +22,7 @@ import builtins
 import inspect
 import re
 import tempfile
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Callable, Iterable, Iterator, Mapping, TypeVar, get_args
@@ -181,15 +182,19 @@ class Context:
       run summary, and added to the run's report output (see :mod:`tbha_graph.core.rundir`).
     """
 
-    def __init__(self, node_id: str, params: BaseModel, work_dir: Path | str | None = None, reporter: Any = None):
+    def __init__(self, node_id: str, params: BaseModel, work_dir: Path | str | None = None, reporter: Any = None,
+                 work_root: Path | str | None = None):
         self.node_id = node_id
         self.params = params
         self._work_dir = work_dir
+        self._work_root = work_root  # without work_dir: a fresh folder under it, named when first used
         self._reporter = reporter
         self.warnings: list[str] = []
 
     @property
     def work_dir(self) -> Path:
+        if self._work_dir is None and self._work_root is not None:
+            self._work_dir = Path(self._work_root) / f"{self.node_id}-{time.monotonic_ns()}"
         if self._work_dir is None:
             self._work_dir = Path(tempfile.mkdtemp(prefix=f"tbha-{self.node_id}-"))
         self._work_dir = Path(self._work_dir)

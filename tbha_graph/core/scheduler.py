@@ -8,7 +8,6 @@ against the declared port types and store them atomically.
 """
 from __future__ import annotations
 
-import os
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -62,13 +61,13 @@ class NodeResult:
 
 def _normalise_outputs(bound: BoundNode, out: Any) -> dict[str, Any]:
     spec = bound.spec
-    if len(spec.outputs) == 1 and not (isinstance(out, dict) and set(out) == set(spec.outputs)):
+    if len(spec.outputs) == 1 and not (isinstance(out, dict) and out.keys() == spec.outputs.keys()):
         out = {next(iter(spec.outputs)): out}
     if not isinstance(out, dict):
         raise PortTypeError(f"returned {type(out).__name__}, expected a dict with outputs {sorted(spec.outputs)}")
-    missing = set(spec.outputs) - set(out)
-    extra = set(out) - set(spec.outputs)
-    if missing or extra:
+    if out.keys() != spec.outputs.keys():
+        missing = set(spec.outputs) - set(out)
+        extra = set(out) - set(spec.outputs)
         raise PortTypeError(
             f"returned outputs {sorted(out)}, declared {sorted(spec.outputs)}"
             + (f"; missing {sorted(missing)}" if missing else "")
@@ -92,8 +91,9 @@ def execute_node(
     key = None
     if cache is not None:
         fps = {port: inputs[src].fingerprints[sport] for port, (src, sport) in bound.inputs.items()}
-        for port in spec.inputs:
-            fps.setdefault(port, None)
+        if len(fps) != len(spec.inputs):  # unconnected optional inputs: None
+            for port in spec.inputs:
+                fps.setdefault(port, None)
         key = cache.key(spec, bound.params, fps)
         try:
             entry = cache.lookup(key)
@@ -103,24 +103,25 @@ def execute_node(
             entry = None
         if entry is not None:
             outs = entry.meta.get("outputs", {})
-            if set(outs) == set(spec.outputs):
+            if outs.keys() == spec.outputs.keys():
                 cache.touch(entry)  # gc removes the least recently *used* entries
-                nw = [str(w) for w in entry.meta.get("node_warnings", []) if isinstance(w, str)]
+                nw = entry.meta.get("node_warnings")
+                nw = [str(w) for w in nw if isinstance(w, str)] if nw else []
                 return NodeResult(bound.id, "cached", key, time.perf_counter() - t0,
-                                  {p: outs[p]["fingerprint"] for p in outs}, None, str(entry.path), entry.meta, warnings, nw)
+                                  {p: o["fingerprint"] for p, o in outs.items()}, None, entry.path, entry.meta, warnings, nw)
             warnings.append(f"cache entry {key[:12]} of node '{bound.id}' has the wrong outputs; recomputing")
             cache.remove(key)
 
     args = {port: inputs[src].value(sport, graph.nodes[src]) for port, (src, sport) in bound.inputs.items()}
     for port in spec.inputs:
         args.setdefault(port, None)
-    work_dir = None
-    if work_root is not None:
-        work_dir = os.path.join(work_root, f"{bound.id}-{time.monotonic_ns()}")  # a Path only when used
-    ctx = Context(bound.id, bound.params, work_dir=work_dir, reporter=reporter)
+    ctx = Context(bound.id, bound.params, reporter=reporter, work_root=work_root)  # the folder made only when used
     try:
-        with using_cache_dir(cache.root if cache is not None else None):  # file-hash memo of this run's cache
+        if cache is None:
             out = _normalise_outputs(bound, spec.fn(ctx, **args))
+        else:
+            with using_cache_dir(cache.root):  # a node hashing a file uses this run's cache's memo
+                out = _normalise_outputs(bound, spec.fn(ctx, **args))
     except TbhaError as e:
         raise NodeFailed(e.message, hint=e.hint, node=bound.id, location=e.location) from e
     except Exception as e:  # noqa: BLE001 - a bug in a node: keep the traceback for its author
