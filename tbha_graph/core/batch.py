@@ -86,6 +86,29 @@ def _with_plugins(plugins: tuple[str, ...]) -> None:
         load_plugin_modules(missing, reg)
 
 
+def _warm(pipeline: str, take: Take, var_name: str, plugins: tuple[str, ...], vars: dict[str, Any] | None,
+          sets: dict[str, Any] | None, base_dir: str | None) -> float:
+    """In a worker: register the plugins and check the pipeline for one take (imports its node modules
+    through the registry), so a take's time is its own work. Returns the seconds spent."""
+    from .runner import load_graph
+
+    t0 = time.perf_counter()
+    _with_plugins(plugins)
+    try:
+        load_graph(pipeline, vars={**(vars or {}), var_name: take.path}, sets={**(sets or {}), **take.sets},
+                   base_dir=Path(base_dir) if base_dir else None)
+    except TbhaError:
+        pass  # the take itself reports it
+    return time.perf_counter() - t0
+
+
+def warm_workers(client: Any, pipeline: str, take: Take, var_name: str = "video", plugins: tuple[str, ...] = (),
+                 vars: dict[str, Any] | None = None, sets: dict[str, Any] | None = None, base_dir: str | None = None) -> dict[str, float]:
+    """Make every worker of ``client`` ready to run ``pipeline``: registry loaded, node modules imported
+    (once per worker process; again is a no-op). Returns seconds spent per worker address."""
+    return client.run(_warm, pipeline, take, var_name, tuple(plugins), vars, sets, base_dir)
+
+
 def run_take(pipeline: str, take: Take, var_name: str, out_dir: str, cache_root: str | None, metrics_name: str, plugins: tuple[str, ...] = (),
              vars: dict[str, Any] | None = None, sets: dict[str, Any] | None = None, base_dir: str | None = None) -> dict[str, Any]:
     """Run one take locally; returns its summary row (never raises for the take's own failures).
@@ -129,8 +152,12 @@ def run_batch(
     plugins: tuple[str, ...] = (),
     vars: dict[str, Any] | None = None,
     sets: dict[str, Any] | None = None,
+    client: Any = None,
 ) -> list[dict[str, Any]]:
     """Run ``pipeline`` once per take; write ``summary.csv``/``summary.md`` under ``out_dir``.
+    ``client``: a ``distributed.Client`` to run the takes on (executor "dask"), kept open afterwards, so
+    batch after batch reuses one warm cluster (:func:`warm_workers`); without it a LocalCluster (or
+    ``scheduler``) is started for this batch and closed after it.
     ``vars``/``sets`` apply to every take, like tbha-run's ``--var``/``--set`` (relative paths from the
     current folder); ``var_name`` is bound to each take and cannot also be given in ``vars``."""
     if vars and var_name in vars:
@@ -153,12 +180,17 @@ def run_batch(
     cache_root = str(cache.root) if cache is not None else None
     rows: list[dict[str, Any]] = []
     if executor == "dask":
-        from .executors.dask_executor import client_for
+        own = client is None
+        cluster = None
+        if own:
+            from .executors.dask_executor import client_for
 
-        client, cluster = client_for(scheduler, workers)
+            client, cluster = client_for(scheduler, workers)
         try:
             from distributed import as_completed
 
+            if takes:  # every worker loads the registry and the pipeline's nodes before its first take
+                warm_workers(client, str(pipeline), takes[0], var_name, tuple(plugins), *common)
             futs = [client.submit(run_take, str(pipeline), t, var_name, str(out_dir), cache_root, metrics_name, tuple(plugins), *common, pure=False) for t in takes]
             by_future = {f.key: t.name for f, t in zip(futs, takes)}
             done: dict[str, dict] = {}
@@ -168,9 +200,10 @@ def run_batch(
                 reporter._print(f"  {row['status']:<7} {row['take']:<28} {row['wall_s']:8.2f} s")
             rows = [done[t.name] for t in takes]
         finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            if own:
+                client.close()
+                if cluster is not None:
+                    cluster.close()
     else:
         for t in takes:
             row = run_take(str(pipeline), t, var_name, str(out_dir), cache_root, metrics_name, tuple(plugins), *common)

@@ -7,6 +7,7 @@ and a did-you-mean suggestion where a name is misspelled.
 """
 from __future__ import annotations
 
+import gc
 import heapq
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -178,7 +179,20 @@ def _check_params(decl: NodeDecl, spec: NodeSpec, errors: list[PipelineError]) -
 
 def build_graph(decl: PipelineDecl, registry: Registry | None = None) -> Graph:
     """Check ``decl`` completely and return its :class:`Graph`; raise :class:`PipelineErrors` listing
-    every problem found."""
+    every problem found.
+
+    The garbage collector is paused meanwhile: checking creates many long-lived objects and no cycles,
+    and repeated full collections over a growing graph made checking 10,000 nodes 1.7x slower per node."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        return _build_graph(decl, registry)
+    finally:
+        if enabled:
+            gc.enable()
+
+
+def _build_graph(decl: PipelineDecl, registry: Registry | None) -> Graph:
     reg = registry
     errors: list[PipelineError] = []
     specs: dict[str, NodeSpec] = {}
