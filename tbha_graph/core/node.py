@@ -15,6 +15,12 @@ The function receives a :class:`Context` (``ctx.params`` is the validated params
 argument per input port, and returns a dict with one entry per output port (or the bare value when the
 node has exactly one output). The contract is plain data on the returned :class:`NodeSpec`, readable
 without running anything (``tbha-graph nodes TYPE`` prints it).
+
+The cache key uses the params as validated. A node whose result depends on more than those values (a
+preset filled in unless a param is set explicitly, read from ``model_fields_set``) gives its params model
+a method ``effective(self) -> dict`` returning exactly what the result depends on (JSON values); the key
+uses that instead, so equivalent settings share a key and different results never do (see
+``export.bvh``).
 """
 from __future__ import annotations
 
