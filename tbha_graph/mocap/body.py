@@ -1,22 +1,26 @@
-"""The body model shared by the calibrators and the 3D solvers: bone lengths and the T-pose on the floor.
+"""The ``body`` port: the actor's bone lengths, reading them, and the T-pose on the floor they give.
 
-A *body* is the JSON dict flowing on ``body`` ports: ``{joint_name: metres}``, one entry per bone, the bone
-named by its child joint (as :data:`tbha_graph.mocap.skeleton.DEFAULT_BONE_LENGTHS`).
+A :class:`Body` is ``{bone: metres}``, one entry per bone, the bone named by its child joint (as
+:data:`tbha_graph.mocap.skeleton.DEFAULT_BONE_LENGTHS`); a missing bone uses the default length. Stored as
+that JSON mapping. :func:`body_lengths` turns a body into the ``(16,)`` array the solvers use and
+:func:`lengths_to_body` back; :func:`tpose_on_floor` is the rest pose the calibrators and the 3D
+solvers start from (metres, calibration world frame).
 """
 from __future__ import annotations
 
 from typing import Mapping
 
 import numpy as np
+from pydantic import RootModel, model_validator
 
 from ..core.errors import NodeError, did_you_mean
 from .skeleton import JOINT_INDEX, JOINT_NAMES, N_JOINTS, bone_lengths_array, tpose
 
-#: Bone names (child joints), in joint order.
-BONE_NAMES: tuple[str, ...] = JOINT_NAMES[1:]
-
 #: Height above the floor of the ankle joint centre in the rest pose, metres (adult, shoes off).
 DEFAULT_ANKLE_HEIGHT = 0.08
+
+#: Bone names (child joints), in joint order.
+BONE_NAMES: tuple[str, ...] = JOINT_NAMES[1:]
 
 
 def check_bone_names(names, where: str) -> None:
@@ -29,18 +33,43 @@ def check_bone_names(names, where: str) -> None:
             )
 
 
-def body_lengths(body: Mapping[str, float] | None, where: str = "body") -> np.ndarray:
-    """Bone lengths ``(N_JOINTS,)`` metres (entry ``j`` = |joint j - parent|, root 0) from a body dict.
-
-    ``None`` gives :data:`DEFAULT_BONE_LENGTHS`; missing bones also fall back to them.
-    Raises :class:`NodeError` for unknown names or non-positive / non-numeric lengths.
-    """
-    body = dict(body or {})
+def _check_lengths(body: Mapping, where: str) -> None:
     check_bone_names(body, where)
     for name, value in body.items():
         # float(): a huge YAML integer (10**40) is a Python int numpy cannot take, 10**400 no float at all
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(float(value) if abs(value) < 1e300 else np.inf) or value <= 0:
             raise NodeError(f"{where}: bone {name!r} has length {value!r}", hint="give a positive length in metres")
+
+
+class Body(RootModel[dict[str, float]]):
+    """Bone lengths ``{bone: metres}`` (see the module docstring); every name a bone, every length
+    positive and finite."""
+
+    @model_validator(mode="before")
+    @classmethod
+    def _check(cls, data):
+        if isinstance(data, Mapping):
+            try:
+                _check_lengths(data, "body")
+            except NodeError as e:
+                raise ValueError(e.message) from None
+        return data
+
+    def lengths(self) -> np.ndarray:
+        """Bone lengths ``(N_JOINTS,)`` metres (entry ``j`` = |joint j - parent|, root 0), defaults for missing bones."""
+        return bone_lengths_array(self.root)
+
+
+def body_lengths(body: Body | Mapping[str, float] | None, where: str = "body") -> np.ndarray:
+    """Bone lengths ``(N_JOINTS,)`` metres (entry ``j`` = |joint j - parent|, root 0) from a body.
+
+    ``None`` gives :data:`DEFAULT_BONE_LENGTHS`; missing bones also fall back to them.
+    Raises :class:`NodeError` naming ``where`` for unknown names or non-positive / non-numeric lengths.
+    """
+    if isinstance(body, Body):
+        return body.lengths()
+    body = dict(body or {})
+    _check_lengths(body, where)
     return bone_lengths_array(body)
 
 

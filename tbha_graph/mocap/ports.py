@@ -1,37 +1,95 @@
-"""Port types shared by the mocap nodes (one place, so producers and consumers agree).
+"""Every port type the mocap stages exchange, declared once (so producers and consumers agree).
 
-Bundles (``Arrays``) and their keys; all positions in metres, world frame y up unless stated:
+A node declares its ports with these constants and nothing else; ``tbha-graph validate`` checks every
+connection with :meth:`PortType.accepts` before anything runs. The value classes and their readers
+live with the types in :mod:`tbha_graph.mocap.bundles` (one module per bundle, named below; the body's in
+:mod:`tbha_graph.mocap.body` with the T-pose it gives).
 
-* ``MOTION``: ``joints`` (n_frames, 16, 3) float metres world; ``fps`` () float; optional ``tracked``
-  (n_frames, 16) bool (False = missing/inferred), ``joint_names`` (16,) str.
-* ``TRACKS2D``: ``points`` (n_frames, 16, 2) float pixels (top-left origin); ``tracked`` (n_frames, 16) bool
-  (False: occluded/lost, ``points`` then holds the prediction); ``fps`` (); ``width``, ``height`` () int;
-  optional ``confidence`` (n_frames, 16) float.
-* ``ROTATIONS``: ``local_quat`` (n_frames, 16, 4) float, scipy order (x, y, z, w), each joint's rotation
-  relative to its parent, identity in the rest T-pose; ``root_position`` (n_frames, 3) metres;
-  ``offsets`` (16, 3) metres, rest offset of each joint from its parent (root: 0);
-  ``end_offsets`` (16, 3) metres, End Site offset of leaf joints (zero elsewhere); ``fps`` ().
-  Semantics as in BVH: world_rot[j] = world_rot[parent] * local[j];
-  pos[j] = pos[parent] + world_rot[parent] @ offsets[j].
+Array bundles are :class:`Bundle` s: named kinds of :class:`~tbha_graph.core.types.Arrays` (one ``.npz``
+in the cache). A bundle input accepts a bundle of its own kind only (a ground truth never feeds a
+``motion`` input even though both are arrays), or a generic ``Arrays`` output whose declared keys fit
+(checked again when it runs). Positions are metres, world frame y up, pixels from the top-left, unless
+stated.
+
+========================  =====================================================  ==========================
+port                      value                                                  reader
+========================  =====================================================  ==========================
+``VIDEO``                 :class:`VideoClip`, a frame range of a file, streamed  ``io.video.iter_frames``
+``VIDEO_FILE``            a video file (``.mp4``)                                 ``io.video``
+``DETECTIONS``            candidate patch regions per frame and colour class      ``bundles.detections``
+``TRACKS2D``              2D joint tracks, pixels                                 ``bundles.tracks``
+``CAMERA``                :class:`~tbha_graph.mocap.camera.CameraModel`          ``CameraModel.camera()``
+``BODY``                  :class:`~.body.Body`, bone lengths in metres           ``body``
+``SUIT``                  :class:`~tbha_graph.mocap.suit.SuitSpec`               (the model itself)
+``COLORS``                :class:`~.bundles.colors.ColorModel`, suit colours     ``bundles.colors``
+``MOTION``                3D joint positions over time                            ``bundles.motion``
+``ROTATIONS``             joint rotations relative to parents (BVH semantics)     ``bundles.rotations``
+``TRUTH``                 a rendered video's ground truth, ``{}`` when none       ``bundles.truth``
+``SIDES``                 depth side per frame and joint                          (one array)
+``ERRORS``                per-frame error curves                                  (arrays by name)
+``SMPL_PARAMS``           SMPL parameters, AMASS layout                           (arrays by name)
+``JOINTS3D_EXPORT``       ``joints3d.npz``: joints, camera, flags                 (arrays by name)
+``METRICS``, ``REPORT``   JSON figures (metrics.json) and a node's report        (dicts)
+``BVH_FILE``, ``IMAGE``,  files: a BVH motion, a PNG picture, an OBJ mesh         (files)
+``MESH``
+========================  =====================================================  ==========================
 """
 from __future__ import annotations
 
-from pydantic import BaseModel, Field
-
-from ..core.types import Array, Arrays, Json, Model
+from ..core.types import Array, Arrays, File, Json, Model, PortType
+from .body import Body
+from .bundles.colors import ColorModel
+from .bundles.detections import DETECTION_KEYS
+from .bundles.video import VideoClip
 from .camera import CameraModel
 from .skeleton import N_JOINTS
 from .suit import SuitSpec
 
+__all__ = [
+    "Bundle", "VideoClip", "VIDEO", "VIDEO_FILE", "DETECTIONS", "TRACKS2D", "CAMERA", "BODY", "SUIT", "COLORS",
+    "MOTION", "ROTATIONS", "TRUTH", "SIDES", "ERRORS", "SMPL_PARAMS", "JOINTS3D_EXPORT", "METRICS", "REPORT", "report_port",
+    "BVH_FILE", "IMAGE", "MESH", "JOINTS3D", "JOINTS2D",
+]
+
+
+class Bundle(Arrays):
+    """A named kind of :class:`Arrays` bundle (``kind``: ``"motion"``, ``"truth"``...).
+
+    Accepts a bundle of the same kind with at least the declared keys, or a generic (unnamed)
+    ``Arrays`` output whose declared keys fit. Stored, validated and hashed as :class:`Arrays`.
+    """
+
+    def __init__(self, kind: str, keys: dict[str, Array] | None = None, doc: str = ""):
+        super().__init__(keys, doc)
+        self.kind = kind
+
+    def describe(self) -> str:
+        return self.kind + super().describe()[len("Arrays"):]
+
+    def _accepts(self, other: PortType) -> bool:
+        if isinstance(other, Bundle) and other.kind != self.kind:
+            return False
+        return super()._accepts(other)
+
+
 JOINTS3D = Array("float", ("n_frames", N_JOINTS, 3), doc="joint positions, metres, world frame")
 JOINTS2D = Array("float", ("n_frames", N_JOINTS, 2), doc="joint positions, pixels, top-left origin")
 
-MOTION = Arrays({"joints": JOINTS3D, "fps": Array("float", ())}, doc="3D motion of the 16 joints")
-TRACKS2D = Arrays(
+VIDEO = Model(VideoClip, doc="video frames, streamed")
+VIDEO_FILE = File(kind="video", suffix=".mp4", doc="a video file")
+DETECTIONS = Bundle("detections", DETECTION_KEYS, doc="per-frame candidate patch regions per colour class")
+TRACKS2D = Bundle(
+    "tracks",
     {"points": JOINTS2D, "tracked": Array("bool", ("n_frames", N_JOINTS)), "fps": Array("float", ())},
     doc="2D joint tracks in pixels",
 )
-ROTATIONS = Arrays(
+CAMERA = Model(CameraModel, doc="calibrated camera")
+BODY = Model(Body, doc="bone lengths {bone: metres}")
+SUIT = Model(SuitSpec, doc="suit colours")
+COLORS = Model(ColorModel, doc="suit colours in a colour space")
+MOTION = Bundle("motion", {"joints": JOINTS3D, "fps": Array("float", ())}, doc="3D motion of the 16 joints")
+ROTATIONS = Bundle(
+    "rotations",
     {
         "local_quat": Array("float", ("n_frames", N_JOINTS, 4)),
         "root_position": Array("float", ("n_frames", 3)),
@@ -41,27 +99,37 @@ ROTATIONS = Arrays(
     },
     doc="joint rotations relative to parents (BVH semantics)",
 )
-CAMERA = Model(CameraModel, doc="calibrated camera")
-SUIT = Model(SuitSpec, doc="suit colours")
+TRUTH = Bundle("truth", doc="ground truth of a rendered video (tbha_graph.mocap.synth.groundtruth), or {} when there is none")
+SIDES = Bundle(
+    "sides", {"sides": Array("int", ("n_frames", N_JOINTS))},
+    doc="depth side per (frame, joint): -1 in front of its parent, +1 behind, 0 root/torso",
+)
+_PER_FRAME = Array("float", ("n_frames",))
+ERRORS = Bundle(
+    "errors",
+    {"mpjpe_mm": _PER_FRAME, "error_2d_px": _PER_FRAME, "reprojection_px": _PER_FRAME, "fps": Array("float", ())},
+    doc="per-frame errors (NaN where unavailable): mpjpe_mm, mpjpe_root_mm, pa_mpjpe_mm, error_2d_px, reprojection_px; fps",
+)
+SMPL_PARAMS = Bundle(
+    "smpl",
+    {
+        "poses": Array("float", ("n_frames", 72)),  # 24 SMPL joints x 3 (axis-angle, radians)
+        "trans": Array("float", ("n_frames", 3)),
+        "betas": Array("float", (None,)),
+        "mocap_framerate": Array("float", ()),
+    },
+    doc="SMPL parameters, AMASS layout: poses (n, 72) rad, trans (n, 3) m, betas (B,), gender, mocap_framerate",
+)
+JOINTS3D_EXPORT = Bundle("joints3d", doc="joints3d.npz: joints, tracked, joint_names, fps, K, R, t")
 METRICS = Json(doc="flat dict of named figures")
+REPORT = Json(doc="a node's report: what it did and measured (JSON)")
 
 
-class VideoClip(BaseModel):
-    """A reference to (a frame range of) a video file: what ``io.video`` outputs. Consumers stream
-    frames with :func:`tbha_graph.mocap.io.video.iter_frames`; the file is never copied or loaded whole."""
-
-    path: str = Field(description="absolute path of the video file")
-    sha256: str = Field(description="content hash of the file (part of downstream cache keys)")
-    start: int = Field(0, ge=0, description="first frame index (inclusive)")
-    stop: int = Field(description="last frame index (exclusive)")
-    scale: float = Field(1.0, gt=0, le=1, description="downscale factor applied to frames")
-    fps: float = Field(gt=0, description="frames per second")
-    width: int = Field(description="frame width after scaling, pixels")
-    height: int = Field(description="frame height after scaling, pixels")
-
-    @property
-    def n_frames(self) -> int:
-        return self.stop - self.start
+def report_port(doc: str) -> Json:
+    """A ``REPORT`` port with a node's own description of what its report holds."""
+    return Json(doc=doc)
 
 
-VIDEO = Model(VideoClip, doc="video frames, streamed")
+BVH_FILE = File(kind="bvh", suffix=".bvh", doc="a BVH motion file")
+IMAGE = File(kind="image", suffix=".png", doc="a PNG picture")
+MESH = File(kind="mesh", suffix=".obj", doc="an OBJ mesh file")

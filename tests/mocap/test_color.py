@@ -8,7 +8,7 @@ from tbha_graph.core.errors import NodeError
 from tbha_graph.core.testing import run_node
 from tbha_graph.mocap.color.hsv import hsv
 from tbha_graph.mocap.color.lab import lab
-from tbha_graph.mocap.color.model import ColorModel, as_color_model
+from tbha_graph.mocap.bundles.colors import ColorModel, as_color_model
 from tbha_graph.mocap.color.rg_chromaticity import rg_chromaticity
 from tbha_graph.mocap.color.spaces import SPACES, convert, rg_chromaticity as rg
 from tbha_graph.mocap.segment.labels import PixelClassifier

@@ -17,9 +17,8 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.errors import NodeError
 from ...core.node import InputPath, node
-from ...core.types import Json
 from ..camera import Camera
-from ..ports import CAMERA
+from ..ports import CAMERA, REPORT
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 
@@ -88,7 +87,7 @@ def find_corners(grey: np.ndarray, columns: int, rows: int) -> np.ndarray | None
     return cv2.cornerSubPix(grey, corners, (5, 5), (-1, -1), criteria)
 
 
-@node("calibrate.checkerboard", version=1, inputs={}, outputs={"camera": CAMERA, "report": Json()}, params=CheckerboardParams)
+@node("calibrate.checkerboard", version=1, inputs={}, outputs={"camera": CAMERA, "report": REPORT}, params=CheckerboardParams)
 def checkerboard(ctx):
     """Intrinsics K and distortion from a checkerboard clip (OpenCV), extrinsics of the first view."""
     import cv2

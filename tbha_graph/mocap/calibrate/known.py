@@ -19,10 +19,9 @@ from pydantic import BaseModel, ConfigDict, Field
 from ...core.errors import NodeError
 from ...core.node import InputPath, node
 from ...core.npzfile import read_npz
-from ...core.types import Json
 from ...core.yamlfile import read_data_file
 from ..camera import Camera
-from ..ports import CAMERA
+from ..ports import CAMERA, REPORT
 
 REQUIRED = ("K", "R", "t", "width", "height")
 
@@ -110,7 +109,7 @@ def read_camera_file(path: Path, rotation_tolerance: float = 1e-4) -> Camera:
     return Camera(K=K, R=R, t=arrays["t"], width=width, height=height, dist=arrays.get("dist", np.zeros(5)))
 
 
-@node("calibrate.known", version=1, inputs={}, outputs={"camera": CAMERA, "report": Json()}, params=KnownParams)
+@node("calibrate.known", version=1, inputs={}, outputs={"camera": CAMERA, "report": REPORT}, params=KnownParams)
 def known(ctx):
     """Camera (K, R, t, image size, distortion) read from a YAML/JSON/npz file."""
     cam = read_camera_file(ctx.params.path, ctx.params.rotation_tolerance)

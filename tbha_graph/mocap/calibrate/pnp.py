@@ -16,12 +16,12 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validat
 
 from ...core.errors import NodeError
 from ...core.node import node, optional
-from ...core.types import Json
 from ..camera import Camera
-from ..ports import CAMERA, TRACKS2D
+from ..ports import BODY, CAMERA, TRACKS2D, report_port
 from ..body import DEFAULT_ANKLE_HEIGHT
 from ..skeleton import CALIBRATION_JOINTS
-from .observations import check_joint_names, model_points, read_tracks, tpose_observation
+from ..bundles.tracks import read_tracks
+from .observations import check_joint_names, model_points, tpose_observation
 from .report import calibration_report
 
 
@@ -75,8 +75,8 @@ def solve_pnp_planar(world: np.ndarray, image: np.ndarray, K: np.ndarray, dist: 
 @node(
     "calibrate.pnp",
     version=1,
-    inputs={"tracks": TRACKS2D, "body": optional(Json(doc="bone lengths {joint: metres}"), "bone lengths; defaults if absent")},
-    outputs={"camera": CAMERA, "report": Json(doc="reprojection errors (px), camera position")},
+    inputs={"tracks": TRACKS2D, "body": optional(BODY, "bone lengths; defaults if absent")},
+    outputs={"camera": CAMERA, "report": report_port("reprojection errors (px), camera position")},
     params=PnPParams,
 )
 def pnp(ctx, tracks, body):

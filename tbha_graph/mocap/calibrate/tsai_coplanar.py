@@ -37,12 +37,12 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
 from ...core.errors import NodeError
 from ...core.node import node, optional
-from ...core.types import Json
 from ..camera import Camera
-from ..ports import CAMERA, TRACKS2D
+from ..ports import BODY, CAMERA, TRACKS2D, report_port
 from ..skeleton import CALIBRATION_JOINTS
 from ..body import DEFAULT_ANKLE_HEIGHT
-from .observations import check_joint_names, model_points, read_tracks, tpose_observation
+from ..bundles.tracks import read_tracks
+from .observations import check_joint_names, model_points, tpose_observation
 from .report import calibration_report, refine_pose
 
 
@@ -183,8 +183,8 @@ def tsai_sensitivity(image_xy: np.ndarray, world_xy: np.ndarray, sol: TsaiSoluti
 @node(
     "calibrate.tsai_coplanar",
     version=1,
-    inputs={"tracks": TRACKS2D, "body": optional(Json(doc="bone lengths {joint: metres}"), "bone lengths; defaults if absent")},
-    outputs={"camera": CAMERA, "report": Json(doc="reprojection errors (px), focal length, sensitivity, camera position")},
+    inputs={"tracks": TRACKS2D, "body": optional(BODY, "bone lengths; defaults if absent")},
+    outputs={"camera": CAMERA, "report": report_port("reprojection errors (px), focal length, sensitivity, camera position")},
     params=TsaiParams,
 )
 def tsai_coplanar(ctx, tracks, body):

@@ -2,12 +2,12 @@
 from __future__ import annotations
 
 from ...core.node import node, optional
-from ..ports import SUIT
-from .model import COLOR_MODEL, ColorParams, color_model_node
+from ..ports import COLORS, SUIT
+from .model import ColorParams, color_model_node
 
 
 @node("color.lab", version=1, inputs={"suit": optional(SUIT, "suit spec (default: the 'suit' param)")},
-      outputs={"model": COLOR_MODEL}, params=ColorParams)
+      outputs={"model": COLORS}, params=ColorParams)
 def lab(ctx, suit=None) -> dict:
     """Suit colours as reference points and tolerances in the lab chroma plane, plus the dark-head and
     white-suit classes (see tbha_graph.mocap.color.model)."""

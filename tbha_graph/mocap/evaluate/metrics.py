@@ -52,20 +52,14 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.errors import NodeError
 from ...core.node import node, optional
-from ...core.types import Array, Arrays, Json
+from ...core.types import Json
 from .verdict import verdict
-from ..io.ground_truth import TRUTH, check_ground_truth, truth_joints2d, truth_visibility
-from ..ports import CAMERA, METRICS, MOTION, TRACKS2D
+from ..bundles.truth import check_ground_truth, truth_joints2d, truth_visibility
+from ..ports import CAMERA, ERRORS, METRICS, MOTION, TRACKS2D, TRUTH
 from ..body import DEFAULT_ANKLE_HEIGHT
 from ..skeleton import JOINT_NAMES, N_JOINTS, PATCHED_JOINTS
 from . import measures as m
 from .doubtful import doubtful_bits, doubtful_ranges
-
-_PER_FRAME = Array("float", ("n_frames",))
-ERRORS = Arrays(
-    {"mpjpe_mm": _PER_FRAME, "error_2d_px": _PER_FRAME, "reprojection_px": _PER_FRAME, "fps": Array("float", ())},
-    doc="per-frame errors (NaN where unavailable): mpjpe_mm, mpjpe_root_mm, pa_mpjpe_mm, error_2d_px, reprojection_px; fps",
-)
 
 
 class MetricsParams(BaseModel):

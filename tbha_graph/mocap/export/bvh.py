@@ -21,11 +21,10 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from ...core.errors import NodeError
-from ...core.node import node
 from ...core.atomic import atomic_write_bytes
-from ...core.types import File
-from ..ports import ROTATIONS
+from ...core.node import node
+from ..bundles.rotations import checked_rotations
+from ..ports import BVH_FILE, IMAGE, ROTATIONS
 from ..skeleton import JOINT_INDEX, JOINT_NAMES, PARENTS
 from .presets import contact_sheet, get_preset, write_checked
 
@@ -81,38 +80,6 @@ class ExportBvhParams(BaseModel):
         return out
 
 
-def checked_rotations(rot: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
-    """Validate and normalise a ROTATIONS bundle: ``(local_quat (n, 16, 4) unit, root_position (n, 3),
-    offsets (16, 3), end_offsets (16, 3), fps)``; :class:`NodeError` naming the frame/joint otherwise."""
-    local = np.asarray(rot["local_quat"], dtype=np.float64)
-    root = np.asarray(rot["root_position"], dtype=np.float64)
-    offsets = np.asarray(rot["offsets"], dtype=np.float64)
-    ends = np.asarray(rot["end_offsets"], dtype=np.float64)
-    fps = float(rot["fps"])
-    n = local.shape[0]
-    if n == 0:
-        raise NodeError("the rotations have no frames: nothing to export")
-    if root.shape != (n, 3):
-        raise NodeError(f"root_position has shape {root.shape}, expected ({n}, 3) to match local_quat")
-    if not (np.isfinite(fps) and fps > 0):
-        raise NodeError(f"fps is {fps}, expected a positive number of frames per second")
-    for name, arr in (("offsets", offsets), ("end_offsets", ends)):
-        if not np.isfinite(arr).all():
-            j = int(np.argwhere(~np.isfinite(arr))[0, 0])
-            raise NodeError(f"{name} of joint '{JOINT_NAMES[j]}' is not finite")
-    bad = ~np.isfinite(root).all(axis=1)
-    if bad.any():
-        raise NodeError(f"root_position is not finite on frame {int(np.flatnonzero(bad)[0])}",
-                        hint="fill gaps (e.g. with a smoothing/interpolation node) before exporting")
-    norm = np.linalg.norm(local, axis=-1)
-    bad = ~np.isfinite(norm) | (norm < 1e-6)
-    if bad.any():
-        f, j = (int(x) for x in np.argwhere(bad)[0])
-        raise NodeError(f"local_quat of joint '{JOINT_NAMES[j]}' on frame {f} is not a rotation ({local[f, j]})",
-                        hint="fill gaps (e.g. with a smoothing/interpolation node) before exporting")
-    return local / norm[..., None], root, offsets, ends, fps
-
-
 
 def preset_for(p: ExportBvhParams):
     """The :class:`.presets.Preset` these params ask for (explicit ``scale`` / ``rotation_order`` win)."""
@@ -147,7 +114,7 @@ def placeholder_png(path: Path, text: str) -> Path:
 
 
 @node("export.bvh", version=2, inputs={"rotations": ROTATIONS},
-      outputs={"bvh": File(kind="bvh", suffix=".bvh"), "sheet": File(kind="image", suffix=".png")},
+      outputs={"bvh": BVH_FILE, "sheet": IMAGE},
       params=ExportBvhParams)
 def export_bvh(ctx, rotations):
     """Write the 16-joint rotations as a BVH file (y up, facing +z, or an application preset) and verify it by reading it back."""

@@ -17,9 +17,8 @@ from __future__ import annotations
 import numpy as np
 
 from ...core.node import node, optional
-from ...core.types import Arrays
 from ..kinematics import forward_kinematics
-from ..ports import CAMERA, MOTION, ROTATIONS
+from ..ports import CAMERA, JOINTS3D_EXPORT, MOTION, ROTATIONS
 from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS
 
 
@@ -27,7 +26,7 @@ from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS
     "export.joints3d",
     version=1,
     inputs={"rotations": ROTATIONS, "camera": CAMERA, "motion": optional(MOTION)},
-    outputs={"joints3d": Arrays(doc="joints3d.npz: joints, tracked, joint_names, fps, K, R, t")},
+    outputs={"joints3d": JOINTS3D_EXPORT},
 )
 def export_joints3d(ctx, rotations, camera, motion):
     """3D joints (forward kinematics of the rotations), tracking flags and the camera, as one npz."""

@@ -14,7 +14,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from ...core.node import node
 from ..ports import MOTION
 from ..skeleton import JOINT_INDEX, JOINT_NAMES, PARENTS, TPOSE_DIRECTIONS, measure_bone_lengths, topological_order
-from .common import motion_joints, with_joints
+from ..bundles.motion import motion_joints, with_joints
 
 #: bones shorter than this (metres) in a frame have no usable direction there
 MIN_LENGTH = 1e-9

@@ -12,7 +12,7 @@ from ...core.errors import NodeError
 from ...core.node import node
 from ..lowpass import butterworth_lowpass
 from ..ports import MOTION
-from .common import motion_joints, with_joints
+from ..bundles.motion import motion_joints, with_joints
 
 
 class ButterworthParams(BaseModel):

@@ -20,11 +20,10 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.node import node
-from ...core.types import Json
-from ..ports import MOTION
+from ..ports import MOTION, report_port
 from ..rigid import procrustes
 from ..skeleton import JOINT_INDEX, JOINT_NAMES
-from .common import motion_joints, with_joints
+from ..bundles.motion import motion_joints, with_joints
 
 #: Nearly rigid groups: the upper torso (shoulder girdle) and the pelvis with the chest (the spine bends
 #: between them, so one rigid body for the whole torso would be centimetres off at the shoulders).
@@ -116,7 +115,7 @@ def missing_runs(missing: np.ndarray) -> list[list]:
     "filter.fill_gaps",
     version=1,
     inputs={"motion": MOTION},
-    outputs={"motion": MOTION, "report": Json(doc="filled and still-missing samples per joint")},
+    outputs={"motion": MOTION, "report": report_port("filled and still-missing samples per joint")},
     params=FillGapsParams,
 )
 def fill_gaps(ctx, motion):

@@ -33,10 +33,9 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.node import node
-from ...core.types import Json
-from ..ports import MOTION
+from ..ports import MOTION, REPORT
 from ..skeleton import JOINT_INDEX
-from .common import motion_joints, with_joints
+from ..bundles.motion import motion_joints, with_joints
 
 #: (hip joint, knee, ankle) indices of each leg
 LEGS: dict[str, tuple[int, int, int]] = {
@@ -237,7 +236,7 @@ def ground(joints: np.ndarray, floor: float, max_height: float) -> np.ndarray:
     return out
 
 
-@node("filter.foot_contact", version=1, inputs={"motion": MOTION}, outputs={"motion": MOTION, "report": Json()},
+@node("filter.foot_contact", version=1, inputs={"motion": MOTION}, outputs={"motion": MOTION, "report": REPORT},
       params=FootContactParams)
 def foot_contact(ctx, motion):
     """Detect foot contacts (ankle speed and height) and lock planted feet with two-bone leg IK; report sliding."""

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from ..ports import MOTION
-from .common import motion_joints, with_joints
+from ..bundles.motion import motion_joints, with_joints
 from ...core.node import node
 
 

@@ -13,7 +13,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.node import node
 from ..ports import MOTION
-from .common import motion_joints, with_joints
+from ..bundles.motion import motion_joints, with_joints
 
 
 class OneEuroParams(BaseModel):

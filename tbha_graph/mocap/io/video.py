@@ -20,8 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from ...core.errors import NodeError
 from ...core.filehash import file_content_hash
 from ...core.node import InputPath, node, optional
-from ...core.types import File
-from ..ports import VIDEO, VideoClip
+from ..ports import VIDEO, VIDEO_FILE, VideoClip
 
 _OPEN_HINT = "check that the file is a video OpenCV can decode (e.g. .mp4 with mp4v/H.264, .avi with MJPG)"
 
@@ -160,7 +159,7 @@ def iter_frames(clip: VideoClip, start: int | None = None, stop: int | None = No
 @node(
     "io.video",
     version=2,
-    inputs={"file": optional(File(kind="video"), "a video produced upstream (instead of the path param)")},
+    inputs={"file": optional(VIDEO_FILE, "a video produced upstream (instead of the path param)")},
     outputs={"video": VIDEO},
     params=VideoParams,
 )

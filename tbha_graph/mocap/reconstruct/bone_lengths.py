@@ -23,10 +23,10 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.errors import NodeError
 from ...core.node import InputPath, node, optional
-from ...core.types import Json
 from ...core.yamlfile import read_data_file
-from ..calibrate.observations import read_tracks, tpose_observation
-from ..ports import CAMERA, TRACKS2D
+from ..bundles.tracks import read_tracks
+from ..calibrate.observations import tpose_observation
+from ..ports import BODY, CAMERA, REPORT, TRACKS2D
 from ..skeleton import BONES, JOINT_INDEX, JOINT_NAMES, bone_lengths_array
 from ..body import DEFAULT_ANKLE_HEIGHT, DEFAULT_STATURE, body_lengths, check_bone_names, lengths_to_body
 
@@ -99,7 +99,7 @@ def tpose_lengths(points2d: np.ndarray, cam, plane_z: float | None, ankle_height
     version=1,
     inputs={"tracks": optional(TRACKS2D, "2D tracks starting with a T-pose (tpose method)"),
             "camera": optional(CAMERA, "calibrated camera (tpose method)")},
-    outputs={"body": Json(doc="bone lengths {joint: metres}"), "report": Json()},
+    outputs={"body": BODY, "report": REPORT},
     params=BoneLengthsParams,
 )
 def bone_lengths(ctx, tracks, camera):

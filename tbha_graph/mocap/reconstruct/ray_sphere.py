@@ -45,10 +45,9 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.errors import NodeError
 from ...core.node import node
-from ...core.types import Json
-from ..calibrate.observations import read_tracks
+from ..bundles.tracks import read_tracks
 from ..camera import Camera
-from ..ports import CAMERA, MOTION, TRACKS2D
+from ..ports import BODY, CAMERA, MOTION, TRACKS2D, report_port
 from ..skeleton import JOINT_INDEX, JOINT_NAMES, N_JOINTS, PARENTS, TRIANGLE_JOINTS
 from ..body import body_lengths
 
@@ -336,8 +335,8 @@ def solve_ray_sphere(
 @node(
     "reconstruct.ray_sphere",
     version=1,
-    inputs={"tracks": TRACKS2D, "camera": CAMERA, "body": Json(doc="bone lengths {joint: metres}")},
-    outputs={"motion": MOTION, "report": Json(doc="two-root choices, no-root lengthenings per joint, frames")},
+    inputs={"tracks": TRACKS2D, "camera": CAMERA, "body": BODY},
+    outputs={"motion": MOTION, "report": report_port("two-root choices, no-root lengthenings per joint, frames")},
     params=RaySphereParams,
 )
 def ray_sphere(ctx, tracks, camera, body):

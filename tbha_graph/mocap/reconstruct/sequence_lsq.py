@@ -31,10 +31,9 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from ...core.node import node
-from ...core.types import Json
-from ..calibrate.observations import read_tracks
+from ..bundles.tracks import read_tracks
 from ..camera import Camera
-from ..ports import CAMERA, MOTION, TRACKS2D
+from ..ports import BODY, CAMERA, MOTION, TRACKS2D, report_port
 from ..skeleton import BONES, JOINT_INDEX, N_JOINTS
 from ..body import body_lengths
 from .ray_sphere import check_image_size, motion_bundle, ray_directions, solve_ray_sphere
@@ -240,8 +239,8 @@ def fit_figures(P: np.ndarray, rays: np.ndarray, tracked: np.ndarray, cam: Camer
 @node(
     "reconstruct.sequence_lsq",
     version=1,
-    inputs={"tracks": TRACKS2D, "camera": CAMERA, "body": Json(doc="bone lengths {joint: metres}")},
-    outputs={"motion": MOTION, "report": Json(doc="reprojection and bone-length fit before/after, windows")},
+    inputs={"tracks": TRACKS2D, "camera": CAMERA, "body": BODY},
+    outputs={"motion": MOTION, "report": report_port("reprojection and bone-length fit before/after, windows")},
     params=SequenceLsqParams,
 )
 def sequence_lsq(ctx, tracks, camera, body):

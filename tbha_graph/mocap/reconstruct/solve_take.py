@@ -49,11 +49,10 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.errors import NodeError
 from ...core.node import node, optional
-from ...core.types import Array, Arrays, Json
-from ..calibrate.observations import read_tracks
+from ..bundles.tracks import read_tracks
 from ..calibrate.pnp import solve_pnp_planar
 from ..camera import Camera
-from ..ports import CAMERA, MOTION, TRACKS2D
+from ..ports import BODY, CAMERA, MOTION, SIDES, TRACKS2D, report_port
 from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS
 from ..body import DEFAULT_ANKLE_HEIGHT, body_lengths, lengths_to_body, tpose_on_floor
 from .take_model import (ANKLES, DEFAULT_POINT_OFFSETS, PER_FRAME, TORSO_PAIRS, TakeData, TakeProblem, Weights,
@@ -403,13 +402,12 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
 @node(
     "reconstruct.solve_take",
     version=1,
-    inputs={"tracks": TRACKS2D, "body": optional(Json(doc="bone lengths {joint: metres}"), "bone lengths; defaults if absent")},
+    inputs={"tracks": TRACKS2D, "body": optional(BODY, "bone lengths; defaults if absent")},
     outputs={
         "motion": MOTION,
         "camera": CAMERA,
-        "report": Json(doc="camera figures (focal, height, distance, tilt, uncertainty), costs, warnings"),
-        "sides": Arrays({"sides": Array("int", ("n_frames", N_JOINTS))},
-                        doc="depth side per (frame, joint): -1 front of its parent, +1 behind, 0 root"),
+        "report": report_port("camera figures (focal, height, distance, tilt, uncertainty), costs, warnings"),
+        "sides": SIDES,
     },
     params=SolveTakeParams,
 )

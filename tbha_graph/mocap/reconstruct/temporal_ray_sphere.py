@@ -38,11 +38,10 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from ...core.errors import NodeError
 from ...core.node import node
-from ...core.types import Array, Arrays, Json
-from ..calibrate.observations import read_tracks
+from ..bundles.tracks import read_tracks
 from ..camera import Camera
 from ..lowpass import butterworth_lowpass
-from ..ports import CAMERA, MOTION, TRACKS2D
+from ..ports import BODY, CAMERA, MOTION, SIDES, TRACKS2D, report_port
 from ..skeleton import JOINT_INDEX, JOINT_NAMES, N_JOINTS, PARENTS
 from ..body import body_lengths, tpose_on_floor
 from .ray_sphere import bone_between, check_image_size, motion_bundle, ray_directions
@@ -209,12 +208,11 @@ def solve_temporal(pixels: np.ndarray, cam: Camera, lengths: np.ndarray, fps: fl
 @node(
     "reconstruct.temporal_ray_sphere",
     version=1,
-    inputs={"tracks": TRACKS2D, "camera": CAMERA, "body": Json(doc="bone lengths {joint: metres}")},
+    inputs={"tracks": TRACKS2D, "camera": CAMERA, "body": BODY},
     outputs={
         "motion": MOTION,
-        "report": Json(doc="no-root frames and depth-sign flips per joint"),
-        "sides": Arrays({"sides": Array("int", ("n_frames", N_JOINTS))},
-                        doc="depth side per (frame, joint): -1 front of its parent, +1 behind, 0 torso"),
+        "report": report_port("no-root frames and depth-sign flips per joint"),
+        "sides": SIDES,
     },
     params=TemporalRaySphereParams,
 )

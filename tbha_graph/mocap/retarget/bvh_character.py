@@ -25,10 +25,10 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.errors import NodeError
 from ...core.node import InputPath, node
-from ...core.types import File, Json
-from ..export.bvh import checked_rotations, placeholder_png
+from ..bundles.rotations import checked_rotations
+from ..export.bvh import placeholder_png
 from ..export.presets import Preset, contact_sheet, get_preset, write_checked
-from ..ports import ROTATIONS
+from ..ports import BVH_FILE, IMAGE, REPORT, ROTATIONS
 from ..skeleton import JOINT_INDEX, JOINT_NAMES
 from .character import Character, load_character
 from .transfer import retarget, segment_direction_errors
@@ -127,7 +127,7 @@ def _sides(char: Character) -> tuple[list[int], list[int]]:
     "retarget.bvh_character",
     version=1,
     inputs={"rotations": ROTATIONS},
-    outputs={"bvh": File(kind="bvh", suffix=".bvh"), "report": Json(), "sheet": File(kind="image", suffix=".png")},
+    outputs={"bvh": BVH_FILE, "report": REPORT, "sheet": IMAGE},
     params=RetargetParams,
 )
 def bvh_character(ctx, rotations):

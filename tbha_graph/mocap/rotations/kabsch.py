@@ -17,7 +17,7 @@ import numpy as np
 from pydantic import Field
 
 from ...core.node import node
-from ..filter.common import motion_joints
+from ..bundles.motion import motion_joints
 from ..ports import MOTION, ROTATIONS
 from ..rigid import procrustes
 from ..skeleton import CHILDREN

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...core.node import node
-from ..filter.common import motion_joints
+from ..bundles.motion import motion_joints
 from ..ports import MOTION, ROTATIONS
 from .common import SolverParams, empty_world, rest_directions, rest_skeleton, rotations_bundle, solve_swings
 from ..quat import rotation_from_pairs

@@ -6,7 +6,7 @@ at reduced resolution; each colour's mask is cleaned by a morphological closing 
 regions by their outer contours (holes inside a region, e.g. highlights, count as inside); a region's centre is its
 centroid (of its convex hull by default). No temporal state: every frame is searched in full.
 
-Output: the ``detections`` bundle (:mod:`tbha_graph.mocap.segment.detections`), pixels of the frames
+Output: the ``detections`` bundle (:mod:`tbha_graph.mocap.bundles.detections`), pixels of the frames
 as streamed (after io.video's downscale).
 """
 from __future__ import annotations
@@ -16,11 +16,10 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.node import node
-from ...core.types import Json
-from ..color.model import ColorModel, as_color_model
+from ..bundles.colors import ColorModel, as_color_model
 from ..io.video import iter_frames
-from ..ports import VIDEO, VideoClip
-from .detections import DETECTIONS, DetectionBuffer
+from ..ports import COLORS, DETECTIONS, VIDEO, VideoClip
+from ..bundles.detections import DetectionBuffer
 from .labels import PixelClassifier, class_regions
 
 
@@ -72,7 +71,7 @@ def segment_clip(clip: VideoClip, model: ColorModel, params: ChromaThresholdPara
 
 @node(
     "segment.chroma_threshold", version=1,
-    inputs={"video": VIDEO, "colors": Json(doc="colour model from a color.* node")},
+    inputs={"video": VIDEO, "colors": COLORS},
     outputs={"detections": DETECTIONS}, params=ChromaThresholdParams,
 )
 def chroma_threshold(ctx, video, colors) -> dict:

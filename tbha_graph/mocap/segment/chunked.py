@@ -24,12 +24,10 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from ...core.node import node
-from ...core.types import Json
-from ..color.model import as_color_model
-from ..ports import VIDEO, VideoClip
+from ..bundles.colors import as_color_model
+from ..ports import COLORS, DETECTIONS, VIDEO, VideoClip
 from . import chroma_threshold as _thr
 from . import hierarchical as _hier
-from .detections import DETECTIONS
 
 SEGMENTERS = {
     "hierarchical": (_hier.segment_clip, _hier.HierarchicalParams),
@@ -87,7 +85,7 @@ def _run_chunks(tasks: list[tuple], workers: int) -> list[dict]:
 
 @node(
     "segment.chunked", version=1,
-    inputs={"video": VIDEO, "colors": Json(doc="colour model from a color.* node")},
+    inputs={"video": VIDEO, "colors": COLORS},
     outputs={"detections": DETECTIONS}, params=ChunkedParams,
 )
 def chunked(ctx, video, colors) -> dict:

@@ -8,7 +8,7 @@ colour has fewer blobs than joints wearing it (a patch was lost: every ``lost_se
 every ``full_search_every`` frames; the regions it finds that no blob covers become new blobs, refined in
 the same frame.
 
-Output: the ``detections`` bundle (:mod:`tbha_graph.mocap.segment.detections`), centres in pixels of
+Output: the ``detections`` bundle (:mod:`tbha_graph.mocap.bundles.detections`), centres in pixels of
 the video frames as streamed (after io.video's downscale).
 """
 from __future__ import annotations
@@ -21,11 +21,10 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from ...core.node import node
-from ...core.types import Json
-from ..color.model import ColorModel, as_color_model
+from ..bundles.colors import ColorModel, as_color_model
 from ..io.video import iter_frames
-from ..ports import VIDEO, VideoClip
-from .detections import DETECTIONS, DetectionBuffer
+from ..ports import COLORS, DETECTIONS, VIDEO, VideoClip
+from ..bundles.detections import DetectionBuffer
 from .labels import PixelClassifier, class_regions
 from .refine import RefineSettings, refine_windows, window_origins
 
@@ -254,7 +253,7 @@ def segment_clip(clip: VideoClip, model: ColorModel, params: HierarchicalParams,
 
 @node(
     "segment.hierarchical", version=1,
-    inputs={"video": VIDEO, "colors": Json(doc="colour model from a color.* node")},
+    inputs={"video": VIDEO, "colors": COLORS},
     outputs={"detections": DETECTIONS}, params=HierarchicalParams,
 )
 def hierarchical(ctx, video, colors) -> dict:

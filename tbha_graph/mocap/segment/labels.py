@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..color.model import ColorModel
+from ..bundles.colors import ColorModel
 from ..color.spaces import index_chroma, index_planes, wedge_distance_sq
 
 

@@ -16,20 +16,9 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from ...core.errors import NodeError
 from ...core.node import InputPath, node
-from ...core.types import Array, Arrays
-from ..ports import ROTATIONS
-from .kintree import N_SMPL_JOINTS
+from ..ports import ROTATIONS, SMPL_PARAMS
 from .pose import smpl_pose_from_rotations
 
-SMPL_PARAMS = Arrays(
-    {
-        "poses": Array("float", ("n_frames", N_SMPL_JOINTS * 3)),
-        "trans": Array("float", ("n_frames", 3)),
-        "betas": Array("float", (None,)),
-        "mocap_framerate": Array("float", ()),
-    },
-    doc="SMPL parameters, AMASS layout: poses (n, 72) rad, trans (n, 3) m, betas (B,), gender, mocap_framerate",
-)
 
 
 class FromRotationsParams(BaseModel):

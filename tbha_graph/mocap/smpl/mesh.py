@@ -15,8 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from ...core.atomic import atomic_path
 from ...core.errors import NodeError
 from ...core.node import InputPath, node
-from ...core.types import File
-from .from_rotations import SMPL_PARAMS
+from ..ports import MESH, SMPL_PARAMS
 from .model import HOW_TO_GET_THE_MODEL, load_model
 
 
@@ -48,7 +47,7 @@ def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray, names: list[s
             np.savetxt(f, faces + 1 + i * V, fmt="f %d %d %d")
 
 
-@node("smpl.mesh", version=1, inputs={"smpl": SMPL_PARAMS}, outputs={"mesh": File("mesh", ".obj")}, params=MeshParams)
+@node("smpl.mesh", version=1, inputs={"smpl": SMPL_PARAMS}, outputs={"mesh": MESH}, params=MeshParams)
 def mesh(ctx, smpl):
     """SMPL meshes (OBJ, one object per frame) of a frame range, with a user-supplied SMPL model file."""
     p = ctx.params

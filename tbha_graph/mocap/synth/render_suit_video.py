@@ -12,19 +12,17 @@ from __future__ import annotations
 
 from ...core.errors import NodeError
 from ...core.node import node, optional
-from ...core.types import Arrays, File
-from ..ports import CAMERA, MOTION, SUIT
+from ..ports import CAMERA, MOTION, SUIT, TRUTH, VIDEO_FILE
 from ..suit import SuitSpec, load_suit
 from .render import RenderParams, render_video
 
-GROUND_TRUTH = Arrays(doc="rendered video's ground truth: see tbha_graph.mocap.synth.groundtruth")
 
 
 @node(
     "synth.render_suit_video",
     version=1,
     inputs={"motion": MOTION, "camera": CAMERA, "suit": optional(SUIT, "suit colours; default suit if unconnected")},
-    outputs={"video": File(kind="video", suffix=".mp4"), "ground_truth": GROUND_TRUTH},
+    outputs={"video": VIDEO_FILE, "ground_truth": TRUTH},
     params=RenderParams,
 )
 def render_suit_video(ctx, motion, camera, suit):

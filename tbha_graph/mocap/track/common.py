@@ -16,7 +16,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.errors import NodeError
-from ..color.model import ColorModel
+from ..bundles.colors import ColorModel
 from ..skeleton import JOINT_INDEX, JOINT_NAMES, N_JOINTS
 from .posture import PostureResult, find_start
 
@@ -62,17 +62,6 @@ def class_joints(model: ColorModel, names: np.ndarray) -> list[list[int]]:
         lacking = [JOINT_NAMES[j] for j in range(N_JOINTS) if j not in covered]
         raise NodeError(f"colour model: no colour class for joint(s) {lacking}", hint="check the suit spec")
     return out
-
-
-def check_detections(det: dict) -> tuple[np.ndarray, np.ndarray]:
-    """``centres`` (n, C, K, 2) and ``areas`` (n, C, K) of a detections bundle, as float64."""
-    for key in ("centres", "areas", "colour_names", "fps", "width", "height"):
-        if key not in det:
-            raise NodeError(f"the detections bundle has no {key!r} array", hint="connect the output of a segment.* node")
-    centres = np.asarray(det["centres"], dtype=np.float64)
-    if centres.ndim != 4 or centres.shape[-1] != 2 or len(centres) == 0:
-        raise NodeError(f"detections 'centres' must have shape (n_frames >= 1, n_colours, max_k, 2), got {centres.shape}")
-    return centres, np.asarray(det["areas"], dtype=np.float64)
 
 
 def start_frame(centres, areas, joints_of, params: StartParams, fps: float) -> tuple[int, np.ndarray]:

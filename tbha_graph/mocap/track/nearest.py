@@ -12,12 +12,11 @@ import numpy as np
 from pydantic import Field
 
 from ...core.node import node
-from ...core.types import Json
-from ..color.model import as_color_model
-from ..ports import TRACKS2D
-from ..segment.detections import DETECTIONS
+from ..bundles.colors import as_color_model
+from ..ports import COLORS, DETECTIONS, TRACKS2D
 from ..skeleton import N_JOINTS
-from .common import StartParams, check_detections, class_joints, frame_candidates, run_passes, start_frame, tracks_bundle
+from ..bundles.detections import check_detections
+from .common import StartParams, class_joints, frame_candidates, run_passes, start_frame, tracks_bundle
 
 
 class NearestParams(StartParams):
@@ -59,7 +58,7 @@ class NearestTracker:
 
 @node(
     "track.nearest", version=1,
-    inputs={"detections": DETECTIONS, "colors": Json(doc="the colour model the segmenter used")},
+    inputs={"detections": DETECTIONS, "colors": COLORS},
     outputs={"tracks": TRACKS2D}, params=NearestParams,
 )
 def nearest(ctx, detections, colors) -> dict:

@@ -37,14 +37,13 @@ from pydantic import Field
 
 from ...core.errors import NodeError
 from ...core.node import node
-from ...core.types import Json
-from ..color.model import as_color_model
-from ..ports import TRACKS2D
-from ..segment.detections import DETECTIONS
+from ..bundles.colors import as_color_model
+from ..ports import COLORS, DETECTIONS, TRACKS2D
 from ..skeleton import JOINT_INDEX, JOINT_NAMES, N_JOINTS, PARENTS
 from .body import TORSO_MIRRORS, BodyBounds
 from .tpose import find_tpose
-from .common import (DOUBT, StartParams, check_detections, class_joints, frame_candidates, run_passes, start_frame,
+from ..bundles.detections import check_detections
+from .common import (DOUBT, StartParams, class_joints, frame_candidates, run_passes, start_frame,
                      tracks_bundle)
 
 HEAD, CHEST, ROOT = JOINT_INDEX["head"], JOINT_INDEX["chest"], JOINT_INDEX["hips"]
@@ -307,7 +306,7 @@ class KalmanTracker:
 
 @node(
     "track.posture_kalman", version=2,
-    inputs={"detections": DETECTIONS, "colors": Json(doc="the colour model the segmenter used")},
+    inputs={"detections": DETECTIONS, "colors": COLORS},
     outputs={"tracks": TRACKS2D}, params=PostureKalmanParams,
 )
 def posture_kalman(ctx, detections, colors) -> dict:

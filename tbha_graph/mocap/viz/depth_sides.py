@@ -10,7 +10,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.node import node
-from ...core.types import Array, Arrays, File
+from ..ports import IMAGE, SIDES
 from ..skeleton import JOINT_NAMES, N_JOINTS
 from .png import new_figure, save_png
 
@@ -24,8 +24,8 @@ class DepthSidesParams(BaseModel):
 @node(
     "viz.depth_sides",
     version=1,
-    inputs={"sides": Arrays({"sides": Array("int", ("n_frames", N_JOINTS))})},
-    outputs={"png": File(kind="image", suffix=".png")},
+    inputs={"sides": SIDES},
+    outputs={"png": IMAGE},
     params=DepthSidesParams,
 )
 def depth_sides(ctx, sides):

@@ -18,8 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.errors import NodeError
 from ...core.node import node
-from ...core.types import File
-from ..evaluate.metrics import ERRORS
+from ..ports import ERRORS, IMAGE
 from . import style
 from .png import new_figure, save_png
 
@@ -89,7 +88,7 @@ def plot_errors(errors: dict, path, title: str = "", dpi: int = 120):
     return save_png(fig, path, dpi)
 
 
-@node("viz.error_plot", version=1, inputs={"errors": ERRORS}, outputs={"png": File(kind="image", suffix=".png")},
+@node("viz.error_plot", version=1, inputs={"errors": ERRORS}, outputs={"png": IMAGE},
       params=ErrorPlotParams)
 def error_plot(ctx, errors):
     """Plot the per-frame errors of evaluate.metrics: 3D error (mm) and 2D error (px) over time, or the

@@ -24,11 +24,10 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.errors import NodeError
 from ...core.node import node, optional
-from ...core.types import File
-from ..io.ground_truth import TRUTH, truth_joints2d
+from ..bundles.truth import truth_joints2d
 from ..io.video import iter_frames
 from ..io.video_writer import open_video_writer
-from ..ports import CAMERA, MOTION, TRACKS2D, VIDEO, VideoClip
+from ..ports import CAMERA, MOTION, TRACKS2D, TRUTH, VIDEO, VIDEO_FILE, VideoClip
 from ..skeleton import N_JOINTS
 from . import draw, style
 
@@ -116,7 +115,7 @@ def draw_overlay(frame: np.ndarray, i: int, layers: OverlayLayers, sizes: draw.S
         "camera": optional(CAMERA, "camera of the motion"),
         "truth": optional(TRUTH, "ground truth (io.ground_truth); {} = none"),
     },
-    outputs={"video": File(kind="video", suffix=".mp4")},
+    outputs={"video": VIDEO_FILE},
     params=OverlayParams,
 )
 def overlay(ctx, video, tracks, motion, camera, truth):

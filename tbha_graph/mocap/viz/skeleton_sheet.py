@@ -20,8 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.errors import NodeError
 from ...core.node import node
-from ...core.types import File
-from ..ports import MOTION
+from ..ports import IMAGE, MOTION
 from ..skeleton import BONES, JOINT_INDEX, N_JOINTS
 from . import style
 from .png import new_figure, save_png
@@ -129,7 +128,7 @@ def plot_sheet(joints: np.ndarray, fps: float, path, n_shown: int = 8, title: st
     return save_png(fig, path, dpi)
 
 
-@node("viz.skeleton_sheet", version=1, inputs={"motion": MOTION}, outputs={"png": File(kind="image", suffix=".png")},
+@node("viz.skeleton_sheet", version=1, inputs={"motion": MOTION}, outputs={"png": IMAGE},
       params=SheetParams)
 def skeleton_sheet(ctx, motion):
     """A PNG contact sheet of ~8 frames of the motion as stick figures, front and side views (y up):

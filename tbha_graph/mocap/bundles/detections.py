@@ -1,4 +1,4 @@
-"""The ``detections`` bundle every segmenter outputs and every tracker reads.
+"""The ``detections`` port: the bundle every segmenter outputs and every tracker reads, and reading it.
 
 Keys (``n`` frames, ``C`` colour classes = the colour model's classes in order, patch colours then
 ``"head"``, ``K`` candidate slots per class):
@@ -17,21 +17,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...core.types import Array, Arrays
+from ...core.errors import NodeError
+from ...core.types import Array
 
-DETECTIONS = Arrays(
-    {
-        "centres": Array("float", ("n_frames", "n_colours", "max_k", 2)),
-        "areas": Array("float", ("n_frames", "n_colours", "max_k")),
-        "boxes": Array("float", ("n_frames", "n_colours", "max_k", 4)),
-        "colour_names": Array("str", ("n_colours",)),
-        "frame_index": Array("int", ("n_frames",)),
-        "fps": Array("float", ()),
-        "width": Array("int", ()),
-        "height": Array("int", ()),
-    },
-    doc="per-frame candidate patch regions per colour class",
-)
+#: the declared keys (the port itself is :data:`tbha_graph.mocap.ports.DETECTIONS`)
+DETECTION_KEYS = {
+    "centres": Array("float", ("n_frames", "n_colours", "max_k", 2)),
+    "areas": Array("float", ("n_frames", "n_colours", "max_k")),
+    "boxes": Array("float", ("n_frames", "n_colours", "max_k", 4)),
+    "colour_names": Array("str", ("n_colours",)),
+    "frame_index": Array("int", ("n_frames",)),
+    "fps": Array("float", ()),
+    "width": Array("int", ()),
+    "height": Array("int", ()),
+}
 
 
 class DetectionBuffer:
@@ -67,3 +66,14 @@ class DetectionBuffer:
             "width": np.asarray(int(width)),
             "height": np.asarray(int(height)),
         }
+
+
+def check_detections(det: dict) -> tuple[np.ndarray, np.ndarray]:
+    """``centres`` (n, C, K, 2) and ``areas`` (n, C, K) of a detections bundle, as float64."""
+    for key in ("centres", "areas", "colour_names", "fps", "width", "height"):
+        if key not in det:
+            raise NodeError(f"the detections bundle has no {key!r} array", hint="connect the output of a segment.* node")
+    centres = np.asarray(det["centres"], dtype=np.float64)
+    if centres.ndim != 4 or centres.shape[-1] != 2 or len(centres) == 0:
+        raise NodeError(f"detections 'centres' must have shape (n_frames >= 1, n_colours, max_k, 2), got {centres.shape}")
+    return centres, np.asarray(det["areas"], dtype=np.float64)

@@ -1,4 +1,9 @@
-"""Helpers shared by the MOTION filters (and the rotation solvers): checking a MOTION bundle."""
+"""The ``motion`` port (MOTION): 3D joint positions over time, and reading them.
+
+Keys: ``joints`` (n_frames, 16, 3) float metres, world frame y up; ``fps`` () Hz; optional ``tracked``
+(n_frames, 16) bool (False = missing/inferred), ``inferred`` (n_frames, 16) bool, ``joint_names`` (16,)
+str. :func:`motion_joints` checks a bundle; :func:`with_joints` replaces its positions.
+"""
 from __future__ import annotations
 
 import numpy as np

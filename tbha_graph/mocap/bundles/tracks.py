@@ -1,0 +1,65 @@
+"""The ``tracks`` port (TRACKS2D): 2D joint tracks, and reading them.
+
+Keys: ``points`` (n_frames, 16, 2) float pixels (top-left origin); ``tracked`` (n_frames, 16) bool (False:
+occluded/lost, ``points`` then holds the tracker's estimate); ``fps`` () Hz; ``width``, ``height`` () int
+pixels; optional ``confidence`` (n_frames, 16), ``frame_index`` (n_frames,) and ``doubtful`` (n_frames,)
+uint8 (:data:`tbha_graph.mocap.track.common.DOUBT` bits). :func:`read_tracks` checks a bundle and returns
+it typed (:class:`Tracks`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...core.errors import NodeError
+from ..skeleton import JOINT_INDEX, N_JOINTS
+
+
+@dataclass(frozen=True)
+class Tracks:
+    """A checked ``TRACKS2D`` bundle: ``points`` (n, 16, 2) px top-left origin, ``tracked`` (n, 16) bool,
+    ``fps``, image ``width`` and ``height`` in pixels."""
+
+    points: np.ndarray
+    tracked: np.ndarray
+    fps: float
+    width: int
+    height: int
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.points.shape[0])
+
+    @property
+    def centre(self) -> np.ndarray:
+        """Image centre ``(2,)`` px, the principal point convention of :meth:`Camera.look_at`."""
+        return np.array([(self.width - 1) / 2.0, (self.height - 1) / 2.0])
+
+
+def read_tracks(tracks: dict, where: str = "tracks") -> Tracks:
+    """Check a ``TRACKS2D`` bundle (keys, shapes, finite values, image size) and return it typed."""
+    for key in ("points", "tracked", "width", "height"):
+        if key not in tracks:
+            raise NodeError(
+                f"{where}: the 2D tracks have no {key!r} array (present: {sorted(tracks)})",
+                hint="connect the output of a tracking node (TRACKS2D: points, tracked, fps, width, height)",
+            )
+    points = np.asarray(tracks["points"], dtype=np.float64)
+    tracked = np.asarray(tracks["tracked"], dtype=bool)
+    if points.ndim != 3 or points.shape[1:] != (N_JOINTS, 2) or tracked.shape != points.shape[:2]:
+        raise NodeError(f"{where}: points {points.shape} / tracked {tracked.shape} are not (n, {N_JOINTS}, 2) / (n, {N_JOINTS})")
+    if points.shape[0] == 0:
+        raise NodeError(f"{where}: the tracks have no frames", hint="check the frame range of the video")
+    bad = ~np.isfinite(points).all(axis=2)
+    if bad.any():
+        f, j = np.argwhere(bad)[0]
+        raise NodeError(
+            f"{where}: frame {f}, joint {list(JOINT_INDEX)[j]!r} has a non-finite 2D position",
+            hint="the tracker must fill every point (a prediction where the joint is lost, tracked=False)",
+        )
+    width, height = int(np.asarray(tracks["width"])), int(np.asarray(tracks["height"]))
+    if width <= 0 or height <= 0:
+        raise NodeError(f"{where}: image size {width}x{height} px is not positive")
+    fps = float(np.asarray(tracks.get("fps", 0.0)))
+    return Tracks(points=points, tracked=tracked, fps=fps, width=width, height=height)
