@@ -55,6 +55,25 @@ class Body(RootModel[dict[str, float]]):
                 raise ValueError(e.message) from None
         return data
 
+    # read like the mapping it is: body["left_knee"], set(body), dict(body)
+    def __getitem__(self, bone: str) -> float:
+        return self.root[bone]
+
+    def __iter__(self):
+        return iter(self.root)
+
+    def __len__(self) -> int:
+        return len(self.root)
+
+    def keys(self):
+        return self.root.keys()
+
+    def items(self):
+        return self.root.items()
+
+    def get(self, bone: str, default: float | None = None) -> float | None:
+        return self.root.get(bone, default)
+
     def lengths(self) -> np.ndarray:
         """Bone lengths ``(N_JOINTS,)`` metres (entry ``j`` = |joint j - parent|, root 0), defaults for missing bones."""
         return bone_lengths_array(self.root)

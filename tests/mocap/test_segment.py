@@ -4,6 +4,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from pydantic import ValidationError
 
 from tbha_graph.core.testing import run_node
 from tbha_graph.mocap.color.hsv import hsv
@@ -148,7 +149,7 @@ def test_bad_colour_model_input(tmp_path):
     clip, _ = _moving_clip(tmp_path, n=1)
     with pytest.raises(NodeError, match="colour model"):
         run_node(hierarchical, video=clip, colors={"space": "xyz"})
-    with pytest.raises(Exception):
+    with pytest.raises(ValidationError, match=r"search_scale\n  Input should be greater than 0"):
         run_node(hierarchical, video=clip, colors={}, params={"search_scale": 0})
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from pydantic import ValidationError
 
 from tbha_graph.core.errors import NodeError
 from tbha_graph.core.testing import run_node
@@ -87,9 +88,9 @@ def test_start_beyond_end(coded_mp4):
 
 
 def test_bad_params_refused(coded_mp4):
-    with pytest.raises(Exception, match="stop"):
+    with pytest.raises(ValidationError, match=r"stop \(5\) must be greater than start \(5\)"):
         run_node(video, {"path": str(coded_mp4), "start": 5, "stop": 5})
-    with pytest.raises(Exception):
+    with pytest.raises(ValidationError, match=r"scale\n  Input should be less than or equal to 1"):
         run_node(video, {"path": str(coded_mp4), "scale": 1.5})
 
 
