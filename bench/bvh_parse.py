@@ -1,10 +1,12 @@
 """Benchmark: BVH parsing and forward kinematics on a real CMU clip. Prints ``name=value`` lines.
 
-Uses /work/shared/mocap/cmu/131_02.bvh (1,247 frames, 31 joints) when present, else the trimmed copy in
-data/mocap/cmu (720 frames). Figures are medians over repeats. Run: ``python bench/bvh_parse.py``.
+Parses the BVH file given as the argument, by default the project's copy of CMU 131_02
+(``data/mocap/cmu/131_02.bvh``, 720 frames, 31 joints). Figures are medians over repeats.
+Run: ``python bench/bvh_parse.py [FILE.bvh]``.
 """
 from __future__ import annotations
 
+import argparse
 import statistics
 import tempfile
 import time
@@ -13,8 +15,7 @@ from pathlib import Path
 from tbha_graph.mocap.io.bvh import bvh_positions, bvh_to_local, read_bvh, write_bvh
 from tbha_graph.mocap.kinematics import forward_kinematics
 
-SHARED = Path("/work/shared/mocap/cmu/131_02.bvh")
-TRIMMED = Path(__file__).resolve().parents[1] / "data" / "mocap" / "cmu" / "131_02.bvh"
+BUNDLED = Path(__file__).resolve().parents[1] / "data" / "mocap" / "cmu" / "131_02.bvh"
 
 
 def median_seconds(fn, repeats: int) -> float:
@@ -27,7 +28,11 @@ def median_seconds(fn, repeats: int) -> float:
 
 
 def main() -> None:
-    path = SHARED if SHARED.is_file() else TRIMMED
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("bvh", nargs="?", type=Path, default=BUNDLED, help=f"BVH file to parse (default: {BUNDLED.name} in data/mocap/cmu)")
+    path = ap.parse_args().bvh
+    if not path.is_file():
+        ap.error(f"{path} does not exist")
     bvh = read_bvh(path)
     local, root = bvh_to_local(bvh)
     n = bvh.n_frames
