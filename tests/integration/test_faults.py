@@ -1,10 +1,15 @@
 """Fault tests of ``tbha-run`` on a small real pipeline (CMU BVH -> Butterworth -> quaternion
 rotations -> export.bvh), each run as a separate process with its own ``TBHA_CACHE_DIR``:
 
-* SIGKILL at a random moment (one moment drawn in each third of an uninterrupted run's duration,
-  fixed seeds), then the same command again: no cache entry is corrupt (every file matches the
-  SHA-256 in its ``meta.json``), no run directory that looks complete holds anything else than the
-  complete result, and the resumed run's ``motion.bvh`` is byte-identical to an uninterrupted run's.
+* SIGKILL at known points of a run, not at guessed moments (which landed during start-up imports):
+  the pipeline has two pass-through nodes of the test plugin :mod:`fault_nodes` that announce they
+  started running (a marker file) and pause, and the plugin announces every cache store between the
+  entry's payload and its ``meta.json``. The test waits for a marker and kills the process group at
+  once: inside a node, or in the middle of storing a node's outputs (first, middle and last node),
+  with the expected number of complete cache entries at that moment. Then the same command again: no
+  cache entry is corrupt (every file matches the SHA-256 in its ``meta.json``), no run directory
+  that looks complete holds anything else than the complete result, and the resumed run's
+  ``motion.bvh`` is byte-identical to an uninterrupted run's.
 * Two ``tbha-run`` processes of the same pipeline at once on one empty cache both succeed with
   identical outputs and a clean cache; eight runs at once (threads) into one run directory all
   succeed and leave one complete result.
@@ -18,7 +23,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import random
 import shutil
 import signal
 import subprocess
@@ -51,7 +55,45 @@ outputs:
   motion.bvh: export.bvh
 """
 TBHA_RUN = [sys.executable, "-m", "tbha_graph.cli.run"]
-KILL_SEEDS = (11, 12, 13)
+
+#: the same work with two marker nodes of the test plugin fault_nodes (kill points inside nodes)
+MARKED_PIPELINE = f"""\
+description: CMU walk -> smoothed -> joint rotations -> BVH, with kill points (fault tests)
+nodes:
+  load:
+    type: io.bvh_load
+    params: {{path: {CLIP}, mapping: cmu}}
+  smooth:
+    type: filter.butterworth
+    inputs: {{motion: load.motion}}
+    params: {{cutoff: 6.0, order: 4}}
+  mid:
+    type: fault.pause_motion
+    inputs: {{motion: smooth.motion}}
+    params: {{label: mid}}
+  solve:
+    type: rotations.quaternion
+    inputs: {{motion: mid.motion}}
+  late:
+    type: fault.pause_rotations
+    inputs: {{rotations: solve.rotations}}
+    params: {{label: late}}
+  export:
+    type: export.bvh
+    inputs: {{rotations: late.rotations}}
+outputs:
+  motion.bvh: export.bvh
+"""
+MARKED_NODES = {"load", "smooth", "mid", "solve", "late", "export"}
+#: where to kill (the marker that must appear first) and how many complete cache entries exist then;
+#: stores happen in run order: load 0, smooth 1, mid 2, solve 3, late 4, export 5
+KILL_POINTS = {
+    "storing load's output (first node)": ("store-0.started", 0),
+    "inside node mid": ("mid.started", 2),
+    "storing solve's output (middle node)": ("store-3.started", 3),
+    "inside node late": ("late.started", 4),
+    "storing export's BVH (last node)": ("store-5.started", 5),
+}
 
 
 def run_cmd(pipeline: Path, out: Path, cache: Path, *extra: str) -> list[str]:
@@ -62,7 +104,10 @@ def env_for(cache: Path) -> dict[str, str]:
     return dict(os.environ, TBHA_CACHE_DIR=str(cache), PYTHONDONTWRITEBYTECODE="1")
 
 
-def tbha_run(pipeline: Path, out: Path, cache: Path, timeout: float = 120) -> subprocess.CompletedProcess:
+def tbha_run(pipeline: Path, out: Path, cache: Path, timeout: float = 120, plugin: bool = False) -> subprocess.CompletedProcess:
+    if plugin:
+        return subprocess.run([*run_cmd(pipeline, out, cache), "--plugin", "fault_nodes"], capture_output=True, text=True,
+                              timeout=timeout, env=plugin_env(cache), cwd=pipeline.parent)
     return subprocess.run(run_cmd(pipeline, out, cache), capture_output=True, text=True, timeout=timeout,
                           env=env_for(cache), cwd=pipeline.parent)
 
@@ -106,34 +151,59 @@ def warm_cache(reference: dict, dest: Path) -> Path:
     return dest
 
 
-@pytest.mark.parametrize("quarter,seed", list(enumerate(KILL_SEEDS)))
-def test_sigkill_mid_run_then_resume(reference, tmp_path, quarter, seed) -> None:
-    pipeline, cache, out = reference["pipeline"], tmp_path / "cache", tmp_path / "run"
-    rng = random.Random(seed)
-    delay = reference["seconds"] * (quarter + rng.random()) / len(KILL_SEEDS)
-    proc = subprocess.Popen(run_cmd(pipeline, out, cache), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            env=env_for(cache), cwd=pipeline.parent, start_new_session=True)
-    time.sleep(delay)
-    try:
-        os.killpg(proc.pid, signal.SIGKILL)
-    except ProcessLookupError:
-        pass  # already finished: still a valid (late) moment
+@pytest.fixture(scope="module")
+def marked_reference(tmp_path_factory) -> dict:
+    """An uninterrupted run of the pipeline with kill points (markers off): its motion.bvh bytes."""
+    d = tmp_path_factory.mktemp("faults_marked_ref")
+    pipeline = d / "walk_marked.yaml"
+    pipeline.write_text(MARKED_PIPELINE)
+    proc = subprocess.run([*run_cmd(pipeline, d / "run", d / "cache"), "--plugin", "fault_nodes"], capture_output=True,
+                          text=True, timeout=120, env=plugin_env(d / "cache"), cwd=d)
+    assert proc.returncode == 0, proc.stderr
+    assert check_cache(d / "cache") == len(MARKED_NODES)
+    return {"bvh": (d / "run" / "motion.bvh").read_bytes(), "pipeline": pipeline}
+
+
+def plugin_env(cache: Path, markers: Path | None = None) -> dict[str, str]:
+    """The environment of a run that can import the test plugin (and, with ``markers``, announces itself)."""
+    env = env_for(cache)
+    env["PYTHONPATH"] = os.pathsep.join([str(Path(__file__).parent), *filter(None, [env.get("PYTHONPATH")])])
+    if markers is not None:
+        env["TBHA_FAULT_MARKERS"] = str(markers)
+    return env
+
+
+@pytest.mark.parametrize("point", list(KILL_POINTS))
+def test_sigkill_mid_run_then_resume(marked_reference, tmp_path, point) -> None:
+    marker, entries_then = KILL_POINTS[point]
+    pipeline, cache, out, markers = marked_reference["pipeline"], tmp_path / "cache", tmp_path / "run", tmp_path / "markers"
+    markers.mkdir()
+    cmd = [*run_cmd(pipeline, out, cache), "--plugin", "fault_nodes"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=plugin_env(cache, markers),
+                            cwd=pipeline.parent, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while not (markers / marker).exists():
+        if proc.poll() is not None or time.monotonic() > deadline:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait(timeout=30)
+            pytest.fail(f"{marker} never appeared (exit {proc.poll()}): {proc.stderr.read().decode()[-2000:]}")
+        time.sleep(0.002)
+    os.killpg(proc.pid, signal.SIGKILL)  # the run is paused just after writing the marker: inside the node or store
     proc.wait(timeout=30)
-    killed = proc.returncode == -signal.SIGKILL
-    print(f"seed {seed}: SIGKILL after {delay:.2f} s ({'killed' if killed else 'had finished'}); "
-          f"{check_cache(cache) if cache.exists() else 0} complete cache entries")
+    proc.stderr.close()
+    assert proc.returncode == -signal.SIGKILL, f"the run was not killed at {point} (exit {proc.returncode})"
+    assert check_cache(cache) == entries_then if cache.exists() else entries_then == 0  # killed where intended
+    assert not out.exists()  # killed before the run directory was written
 
-    if cache.exists():
-        check_cache(cache)
-    if out.exists():  # only ever the complete result
-        assert (out / "manifest.json").is_file() and (out / "motion.bvh").read_bytes() == reference["bvh"]
-
-    again = tbha_run(pipeline, out, cache)
+    again = tbha_run(pipeline, out, cache, plugin=True)
     assert again.returncode == 0, again.stderr
-    assert (out / "motion.bvh").read_bytes() == reference["bvh"]
-    assert check_cache(cache) == 4
+    assert (out / "motion.bvh").read_bytes() == marked_reference["bvh"]
+    assert check_cache(cache) == len(MARKED_NODES)
     manifest = json.loads((out / "manifest.json").read_text())
-    assert set(manifest["nodes"]) == {"load", "smooth", "solve", "export"}
+    assert set(manifest["nodes"]) == MARKED_NODES
+    ran = {n for n, info in manifest["nodes"].items() if info["status"] == "ran"}
+    assert len(ran) == len(MARKED_NODES) - entries_then  # the entries stored before the kill are reused
 
 
 def test_runs_at_once_on_one_cache(reference, tmp_path) -> None:
