@@ -56,33 +56,16 @@ outputs:
 """
 TBHA_RUN = [sys.executable, "-m", "tbha_graph.cli.run"]
 
-#: the same work with two marker nodes of the test plugin fault_nodes (kill points inside nodes)
-MARKED_PIPELINE = f"""\
+#: the same work with two marker nodes of the test plugin fault_nodes (kill points inside nodes); it
+#: extends PIPELINE written beside it as walk.yaml
+MARKED_PIPELINE = """\
 description: CMU walk -> smoothed -> joint rotations -> BVH, with kill points (fault tests)
+extends: walk.yaml
 nodes:
-  load:
-    type: io.bvh_load
-    params: {{path: {CLIP}, mapping: cmu}}
-  smooth:
-    type: filter.butterworth
-    inputs: {{motion: load.motion}}
-    params: {{cutoff: 6.0, order: 4}}
-  mid:
-    type: fault.pause_motion
-    inputs: {{motion: smooth.motion}}
-    params: {{label: mid}}
-  solve:
-    type: rotations.quaternion
-    inputs: {{motion: mid.motion}}
-  late:
-    type: fault.pause_rotations
-    inputs: {{rotations: solve.rotations}}
-    params: {{label: late}}
-  export:
-    type: export.bvh
-    inputs: {{rotations: late.rotations}}
-outputs:
-  motion.bvh: export.bvh
+  mid: {type: fault.pause_motion, inputs: {motion: smooth.motion}, params: {label: mid}}
+  solve: {inputs: {motion: mid.motion}}
+  late: {type: fault.pause_rotations, inputs: {rotations: solve.rotations}, params: {label: late}}
+  export: {inputs: {rotations: late.rotations}}
 """
 MARKED_NODES = {"load", "smooth", "mid", "solve", "late", "export"}
 #: where to kill (the marker that must appear first) and how many complete cache entries exist then;
@@ -155,6 +138,7 @@ def warm_cache(reference: dict, dest: Path) -> Path:
 def marked_reference(tmp_path_factory) -> dict:
     """An uninterrupted run of the pipeline with kill points (markers off): its motion.bvh bytes."""
     d = tmp_path_factory.mktemp("faults_marked_ref")
+    (d / "walk.yaml").write_text(PIPELINE)
     pipeline = d / "walk_marked.yaml"
     pipeline.write_text(MARKED_PIPELINE)
     proc = subprocess.run([*run_cmd(pipeline, d / "run", d / "cache"), "--plugin", "fault_nodes"], capture_output=True,
