@@ -21,11 +21,12 @@ from tbha_graph.mocap.skeleton import bone_lengths_array
 
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT = ROOT / "pipelines" / "default.yaml"
+SEED = ROOT / "pipelines" / "seed.yaml"
 
 
-def _default_pipeline(tmp_path: Path, **rewire: str) -> Path:
-    """pipelines/default.yaml with absolute data paths, each ``old=new`` text replacement applied once."""
-    text = DEFAULT.read_text()
+def _default_pipeline(tmp_path: Path, base: Path = DEFAULT, **rewire: str) -> Path:
+    """A bundled pipeline (default.yaml) with absolute data paths, each ``old=new`` text replacement applied once."""
+    text = base.read_text()
     text = text.replace("../data/sample/", str(ROOT / "data" / "sample") + "/")
     for old, new in rewire.items():
         assert text.count(old) == 1, old
@@ -49,11 +50,16 @@ def test_validate_rejects_colors_from_a_body_report(tmp_path, capsys):
 
 
 def test_validate_rejects_a_body_from_a_report_and_truth_as_motion(tmp_path, capsys):
-    p = _default_pipeline(tmp_path, **{"inputs: {tracks: track.tracks, body: body.body}": "inputs: {tracks: track.tracks, body: body.report}",
-                                       "inputs: {motion: fill.motion}": "inputs: {motion: truth.truth}"})
+    assert graph_main(["validate", str(_default_pipeline(tmp_path, SEED))]) == 0
+    p = _default_pipeline(tmp_path, SEED, **{
+        "inputs: {tracks: track.tracks, body: body.body}": "inputs: {tracks: track.tracks, body: body.report}",
+        "inputs: {tracks: track.tracks, camera: calibrate.camera, body: body.body}":
+            "inputs: {tracks: track.tracks, camera: calibrate.camera, body: body.report}",
+        "inputs: {motion: fill.motion}": "inputs: {motion: truth.truth}"})
     assert graph_main(["validate", str(p)]) == 2
     err = capsys.readouterr().err
-    assert "input 'body' takes Model[Body] but 'body.report' gives Json" in err
+    for node in ("calibrate", "reconstruct"):
+        assert f"node '{node}': type mismatch: input 'body' takes Model[Body] but 'body.report' gives Json" in err, err
     assert re.search(r"node 'smooth': type mismatch: input 'motion' takes motion\{.*\} but 'truth\.truth' gives truth", err), err
 
 
