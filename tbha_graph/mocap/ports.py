@@ -11,28 +11,21 @@ in the cache). A bundle input accepts a bundle of its own kind only (a ground tr
 (checked again when it runs). Positions are metres, world frame y up, pixels from the top-left, unless
 stated.
 
-========================  =====================================================  ==========================
-port                      value                                                  reader
-========================  =====================================================  ==========================
-``VIDEO``                 :class:`VideoClip`, a frame range of a file, streamed  ``io.video.iter_frames``
-``VIDEO_FILE``            a video file (``.mp4``)                                 ``io.video``
-``DETECTIONS``            candidate patch regions per frame and colour class      ``bundles.detections``
-``TRACKS2D``              2D joint tracks, pixels                                 ``bundles.tracks``
-``CAMERA``                :class:`~tbha_graph.mocap.camera.CameraModel`          ``CameraModel.camera()``
-``BODY``                  :class:`~.body.Body`, bone lengths in metres           ``body``
-``SUIT``                  :class:`~tbha_graph.mocap.suit.SuitSpec`               (the model itself)
-``COLORS``                :class:`~.bundles.colors.ColorModel`, suit colours     ``bundles.colors``
-``MOTION``                3D joint positions over time                            ``bundles.motion``
-``ROTATIONS``             joint rotations relative to parents (BVH semantics)     ``bundles.rotations``
-``TRUTH``                 a rendered video's ground truth, ``{}`` when none       ``bundles.truth``
-``SIDES``                 depth side per frame and joint                          (one array)
-``ERRORS``                per-frame error curves                                  (arrays by name)
-``SMPL_PARAMS``           SMPL parameters, AMASS layout                           (arrays by name)
-``JOINTS3D_EXPORT``       ``joints3d.npz``: joints, camera, flags                 (arrays by name)
-``METRICS``, ``REPORT``   JSON figures (metrics.json) and a node's report        (dicts)
-``BVH_FILE``, ``IMAGE``,  files: a BVH motion, a PNG picture, an OBJ mesh         (files)
-``MESH``
-========================  =====================================================  ==========================
+* ``VIDEO``: :class:`~.bundles.video.VideoClip`, a frame range of a video file, streamed
+  (``io.video.iter_frames``); ``VIDEO_FILE``: a video file (``.mp4``).
+* ``DETECTIONS``: candidate patch regions per frame and colour class (:mod:`.bundles.detections`).
+* ``TRACKS2D``: 2D joint tracks in pixels (:mod:`.bundles.tracks`).
+* ``CAMERA``: :class:`~tbha_graph.mocap.camera.CameraModel` (``.camera()`` gives the working camera).
+* ``BODY``: :class:`~.body.Body`, bone lengths in metres (:mod:`tbha_graph.mocap.body`).
+* ``SUIT``: :class:`~tbha_graph.mocap.suit.SuitSpec`; ``COLORS``: :class:`~.bundles.colors.ColorModel`,
+  the suit's colours in one colour space (:mod:`.bundles.colors`).
+* ``MOTION``: 3D joint positions over time (:mod:`.bundles.motion`).
+* ``ROTATIONS``: joint rotations relative to their parents, BVH semantics (:mod:`.bundles.rotations`).
+* ``TRUTH``: a rendered video's ground truth, ``{}`` when there is none (:mod:`.bundles.truth`).
+* ``SIDES`` (depth side per frame and joint), ``ERRORS`` (per-frame error curves), ``SMPL_PARAMS``
+  (AMASS layout), ``JOINTS3D_EXPORT`` (``joints3d.npz``): arrays read by name.
+* ``METRICS`` (metrics.json) and ``REPORT`` / :func:`report_port` (a node's report): JSON.
+* ``BVH_FILE``, ``IMAGE`` (PNG), ``MESH`` (OBJ): files.
 """
 from __future__ import annotations
 
