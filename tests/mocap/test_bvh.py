@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pydantic import ValidationError
 from scipy.spatial.transform import Rotation
 
 from tbha_graph.core.errors import NodeError
@@ -327,7 +328,7 @@ def test_export_bvh_scale_and_order(cmu_rotations: dict[str, np.ndarray]) -> Non
     bvh = read_bvh(path)
     assert bvh.joints[3].channels == ("Yrotation", "Xrotation", "Zrotation")
     assert np.abs(bvh_positions(bvh) / 100 - _fk_in(cmu_rotations)).max() < 1e-4
-    with pytest.raises(Exception, match="rotation_order"):
+    with pytest.raises(ValidationError, match="rotation_order"):
         run_node(export_bvh, {"rotation_order": "ZXX"}, rotations=cmu_rotations)
 
 

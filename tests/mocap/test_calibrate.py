@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 import pytest
+from pydantic import ValidationError
 
 from tbha_graph.core.errors import NodeError
 from tbha_graph.core.testing import run_node
@@ -91,7 +92,7 @@ def test_tsai_refine_reduces_reprojection_error_on_noisy_points():
 
 
 def test_tsai_bad_joint_name_is_refused_with_suggestion():
-    with pytest.raises(Exception, match="did you mean 'chest'"):
+    with pytest.raises(ValidationError, match="did you mean 'chest'"):
         tsai_coplanar.params.model_validate({"joints": ["neck", "chst", "hips", "left_shoulder", "right_shoulder"]})
 
 
@@ -122,9 +123,9 @@ def test_pnp_recovers_pose_and_agrees_with_tsai(name):
 
 
 def test_pnp_params_need_exactly_one_intrinsics():
-    with pytest.raises(Exception, match="exactly one"):
+    with pytest.raises(ValidationError, match="exactly one"):
         pnp.params.model_validate({})
-    with pytest.raises(Exception, match="exactly one"):
+    with pytest.raises(ValidationError, match="exactly one"):
         pnp.params.model_validate({"focal_px": 800, "K": [[800, 0, 320], [0, 800, 240], [0, 0, 1]]})
 
 

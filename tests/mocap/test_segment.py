@@ -160,5 +160,5 @@ def test_threshold_at_half_resolution(tmp_path, model):
 
 
 def test_window_params_checked():
-    with pytest.raises(Exception, match="min_window"):
+    with pytest.raises(ValidationError, match="min_window"):
         HierarchicalParams(min_window=200, max_window=100)

@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pydantic import ValidationError
 
 from tbha_graph.core.testing import run_node
 from tbha_graph.mocap.io.bvh import read_bvh
@@ -85,7 +86,7 @@ def test_units_override_and_axes(tmp_path: Path, walk: dict[str, np.ndarray]) ->
 def test_bvh_load_node(walk: dict[str, np.ndarray]) -> None:
     out = run_node(bvh_load, {"path": str(CMU / "131_02.bvh")})
     assert np.array_equal(out["motion"]["joints"], walk["joints"])
-    with pytest.raises(Exception, match="greater than 0"):
+    with pytest.raises(ValidationError, match="greater than 0"):
         run_node(bvh_load, {"path": str(CMU / "131_02.bvh"), "units_to_metres": 0})
 
 

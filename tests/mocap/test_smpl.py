@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pydantic import ValidationError
 from scipy.spatial.transform import Rotation
 
 from tbha_graph.core.errors import NodeError
@@ -351,7 +352,7 @@ def test_from_rotations_node_writes_amass_keys(cmu_rotations, tmp_path):
     n = cmu_rotations["local_quat"].shape[0]
     assert out["poses"].shape == (n, 72) and out["trans"].shape == (n, 3) and out["betas"].shape == (10,)
     assert str(out["gender"]) == "female" and float(out["mocap_framerate"]) == pytest.approx(120.0, abs=1e-3)
-    with pytest.raises(Exception, match="gender"):
+    with pytest.raises(ValidationError, match="gender"):
         run_node(from_rotations, {"gender": "other"}, rotations=cmu_rotations)
     model_path = tmp_path / "m.npz"
     save_model_npz(make_model(rest_joints_of(cmu_rotations)), model_path)
