@@ -31,6 +31,8 @@ __all__ = ["Cache", "CorruptEntry", "Entry", "default_cache_dir"]
 
 
 _O_READ = os.O_RDONLY | getattr(os, "O_BINARY", 0)
+#: reading an entry must not write its inode (an access-time update per hit): usage is marked by touch()
+_O_NOATIME = getattr(os, "O_NOATIME", 0)
 
 
 class CorruptEntry(CacheError):
@@ -116,6 +118,7 @@ class Cache:
         self.entries = self.root / "entries"
         self._entries_str = str(self.entries)
         self.tmp = self.root / "tmp"
+        self._noatime = _O_NOATIME
         self.file_memo: StatMemo = memo_for(self.root, "filehash")  # per cache folder, shared in the process
         self.code_memo: StatMemo = memo_for(self.root, "codehash")
 
@@ -136,10 +139,16 @@ class Cache:
     def lookup(self, key: str) -> Entry | None:
         """The complete entry for ``key``, or None. An unreadable meta.json counts as corrupt."""
         d = f"{self._entries_str}{os.sep}{key[:2]}{os.sep}{key}"  # plain strings and fds: the cache-hit hot path
+        meta_path = f"{d}{os.sep}meta.json"
         try:
-            fd = os.open(f"{d}{os.sep}meta.json", _O_READ)
+            fd = os.open(meta_path, _O_READ | self._noatime)
         except FileNotFoundError:
             return None
+        except PermissionError:  # O_NOATIME needs the file's owner: read it the ordinary way
+            if not self._noatime:
+                raise CorruptEntry(f"cache entry {key[:12]}: cannot open meta.json: permission denied") from None
+            self._noatime = 0
+            return self.lookup(key)
         except OSError as e:
             raise CorruptEntry(f"cache entry {key[:12]}: cannot open meta.json: {e}") from None
         try:

@@ -265,18 +265,11 @@ def canonical_params(params: BaseModel, file_hash: Callable[[Path], str] | None 
 
 def node_key(spec: NodeSpec, params: BaseModel, input_fingerprints: dict[str, str | None],
              file_hash: Callable[[Path], str] | None = None, code_memo: Memo | None = None) -> str:
-    """The cache key of one node evaluation: SHA-256 of one canonical JSON value per line (format, type,
-    version, code fingerprint, params, input fingerprints; JSON strings hold no raw newline)."""
+    """The cache key of one node evaluation: SHA-256 of the format line, the code fingerprint and the
+    canonical JSON of ``[type, version, effective params, input fingerprints]``, one per line."""
     code = spec.__dict__.get("_code_fingerprint") or code_fingerprint(spec, code_memo)
-    text = "\n".join((
-        _HEADER,
-        _dumps(spec.type),
-        _dumps(spec.version),
-        code,
-        _dumps(canonical_params(params, file_hash)),
-        _dumps(input_fingerprints),
-    ))
-    return hashlib.sha256(text.encode()).hexdigest()
+    data = _dumps([spec.type, spec.version, canonical_params(params, file_hash), input_fingerprints])
+    return hashlib.sha256(f"{_HEADER}\n{code}\n{data}".encode()).hexdigest()
 
 
 _HEADER = f"tbha-graph cache key, format {CACHE_FORMAT}"
