@@ -119,6 +119,9 @@ class Cache:
         self._entries_str = str(self.entries)
         self.tmp = self.root / "tmp"
         self._noatime = _O_NOATIME
+        # parsed meta.json by key, valid while the file is the same (inode, size, mtime): a study or batch
+        # looks the same entries up again and again (the file is still opened and checked every time)
+        self._metas: dict[str, tuple[tuple[int, int, int], dict]] = {}
         self.file_memo: StatMemo = memo_for(self.root, "filehash")  # per cache folder, shared in the process
         self.code_memo: StatMemo = memo_for(self.root, "codehash")
 
@@ -131,6 +134,9 @@ class Cache:
         from .keys import node_key
 
         return node_key(spec, params, input_fingerprints, file_hash=self.file_hash, code_memo=self.code_memo)
+
+    #: at most this many parsed meta.json kept per cache object
+    META_MEMO_MAX = 100_000
 
     def _entry_dir(self, key: str) -> Path:
         return self.entries / key[:2] / key
@@ -153,6 +159,9 @@ class Cache:
             raise CorruptEntry(f"cache entry {key[:12]}: cannot open meta.json: {e}") from None
         try:
             st = os.fstat(fd)
+            known = self._metas.get(key)
+            if known is not None and known[0] == (st.st_ino, st.st_size, st.st_mtime_ns):
+                return Entry(key, d, known[1], st.st_mtime)  # the same meta.json, read before in this process
             raw = os.read(fd, st.st_size + 1)
             while len(raw) < st.st_size:  # a short read (never for a small local file): read the rest
                 more = os.read(fd, st.st_size + 1 - len(raw))
@@ -168,10 +177,13 @@ class Cache:
             meta = json.loads(raw)
         except ValueError:
             raise CorruptEntry(f"cache entry {key[:12]}: meta.json is not valid JSON") from None
+        if len(self._metas) < self.META_MEMO_MAX:
+            self._metas[key] = ((st.st_ino, st.st_size, st.st_mtime_ns), meta)
         return Entry(key, d, meta, used)
 
     def remove(self, key: str) -> None:
         """Remove an entry (rename away first, so readers never see it half-deleted)."""
+        self._metas.pop(key, None)
         d = self._entry_dir(key)
         if not d.exists():
             return
