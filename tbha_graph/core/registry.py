@@ -199,8 +199,8 @@ class Registry:
                 try:
                     self.add_lazy(ep.module, source)
                     continue
-                except Exception as e:  # noqa: BLE001 - cannot be scanned: import it as before
-                    self.failures.append(ImportFailure(source, ep.value, f"cannot index: {type(e).__name__}: {e}"))
+                except Exception:  # noqa: BLE001 - cannot be scanned (no source files): import it now
+                    pass
             try:
                 target = ep.load()
             except Exception as e:  # noqa: BLE001
