@@ -156,8 +156,8 @@ class Registry:
                 owners.add(self._index[t])
             if t in self._specs:
                 owners.add((self._specs[t].module, self._specs[t].source))
-            if len(owners) > 1:
-                (m1, s1), (m2, s2) = sorted(owners)[:2]
+            if len({m for m, _ in owners}) > 1:  # two modules (the same one indexed twice is no conflict)
+                (m1, s1), (m2, s2) = sorted(dict(owners).items())[:2]
                 self._conflicts[t] = (f"node type '{t}' is declared twice: by package '{s1}' ({m1}) "
                                       f"and by package '{s2}' ({m2})")
                 self.failures.append(ImportFailure(source, module, self._conflicts[t]))
@@ -187,7 +187,7 @@ class Registry:
         """Import every lazily indexed module (listing all types needs them; so does an unknown name)."""
         lazy, self._lazy = self._lazy, []
         for module, source in lazy:
-            self._index = {t: v for t, v in self._index.items() if not v[0].startswith(module)}
+            self._index = {t: v for t, v in self._index.items() if v[0] != module and not v[0].startswith(module + ".")}
             self.add_module(module, source)
 
     def load_entry_points(self, group: str = ENTRY_POINT_GROUP, lazy: bool = True) -> None:
