@@ -16,7 +16,9 @@ worker, :func:`tbha_graph.core.batch.warm_workers`); the batch is then timed on 
 warmed once too (``local_warm_s``). Prints ``name=value`` lines: ``<executor>_s``,
 ``<executor>_takes_per_s``, ``<executor>_take_median_s`` (one take, timed inside its worker),
 ``speedup`` (1 worker over 2 workers, warm clusters) and ``speedup_with_fixed_cost`` (the same with each
-cluster's start and warm-up added). Dask workers run one thread each. Run:
+cluster's start and warm-up added), and ``machine_parallelism_2proc`` (two pure-Python busy loops at
+once over one, measured right after: the speedup the machine itself allows at that moment; on a shared
+machine it can be far below 2). Dask workers run one thread each. Run:
 ``python bench/batch_scaling.py [--work bvh|video] [--takes 8] [--repeat-clip 75] [--frames 60]``.
 The machine has 2 cores, shared; numbers vary with its load (``load_average=`` is printed).
 """
@@ -89,6 +91,28 @@ def timed(label: str, pipeline: Path, takes: list[Take], var: str, out: Path, **
     return seconds, statistics.median(r["wall_s"] for r in rows)
 
 
+def _busy(n: int) -> float:
+    t = time.perf_counter()
+    x = 0
+    for i in range(n):
+        x += i
+    return time.perf_counter() - t
+
+
+def machine_parallelism(n: int = 20_000_000) -> float:
+    """What 2 processes get from this machine now: one pure-Python busy loop, then two at once
+    (speedup = 2 x one / both; 2.0 on 2 free cores, 1.0 when only one core's worth is free)."""
+    import multiprocessing as mp
+
+    one = _busy(n)
+    with mp.get_context("spawn").Pool(2) as pool:
+        pool.map(_busy, [1000, 1000])  # started
+        t = time.perf_counter()
+        pool.map(_busy, [n, n])
+        both = time.perf_counter() - t
+    return 2 * one / both
+
+
 def on_cluster(workers: int, pipeline: Path, takes: list[Take], var: str, out: Path) -> dict[str, float]:
     """Start a LocalCluster, warm its workers, then time the batch on it; each phase apart."""
     from distributed import Client, LocalCluster
@@ -145,6 +169,7 @@ def main() -> int:
         fixed2 = d2["cluster_start"] + d2["warm"]
         print(f"speedup_with_fixed_cost={(d1['batch'] + fixed1) / (d2['batch'] + fixed2):.2f}")
         print(f"speedup={d1['batch'] / d2['batch']:.2f}")
+        print(f"machine_parallelism_2proc={machine_parallelism():.2f}")  # the most 2 workers could get now
     return 0
 
 
