@@ -2,10 +2,11 @@
 sample's: each clip is rendered by the project's renderer (``pipelines/evaluate_render.yaml``) and captured
 by ``pipelines/default.yaml``; prints ``name=value`` per take:
 
-    <take>_mpjpe_mm (one rigid alignment, no scale), <take>_pa_mpjpe_mm, <take>_root_mpjpe_mm,
+    <take>_mpjpe_mm (one rigid alignment, no scale), <take>_pa_mpjpe_mm, <take>_root_mpjpe_mm, <take>_joint_angle_err_deg,
     <take>_focal_err_pct, <take>_floor_penetration_mm, <take>_seconds
 
-    python bench/solver_accuracy.py [--focal-given]     # --focal-given: the render's focal length is given
+    python bench/solver_accuracy.py [--focal-given] [--set node.param=value ...]
+        # --focal-given: the render's focal length is given; --set: passed to the capture (e.g. solver settings)
 """
 from __future__ import annotations
 
@@ -29,6 +30,7 @@ TAKES = (
 
 def main() -> None:
     given = "--focal-given" in sys.argv
+    sets = [a for i, a in enumerate(sys.argv) if i > 0 and sys.argv[i - 1] == "--set"]
     for name, clip, seconds, eye, target, f in TAKES:
         out = Path(tempfile.mkdtemp(prefix=f"tbha-acc-{name}-"))
         cmd = [sys.executable, "-m", "tbha_graph.cli.run", str(ROOT / "pipelines" / "evaluate_render.yaml"),
@@ -39,6 +41,8 @@ def main() -> None:
                "--set", f"camera.focal_px={f}"]
         if given:
             cmd += ["--var", f"focal_px={f}"]
+        for s in sets:
+            cmd += ["--set", s]
         t0 = time.perf_counter()
         run = subprocess.run(cmd, capture_output=True, text=True)
         dt = time.perf_counter() - t0
@@ -46,7 +50,7 @@ def main() -> None:
             print(f"{name}_error={run.stderr.strip().splitlines()[-1] if run.stderr.strip() else run.returncode}")
             continue
         m = json.loads((out / "run" / "metrics.json").read_text())
-        for key in ("mpjpe_mm", "pa_mpjpe_mm", "root_mpjpe_mm", "focal_err_pct", "floor_penetration_mm"):
+        for key in ("mpjpe_mm", "pa_mpjpe_mm", "root_mpjpe_mm", "joint_angle_err_deg", "focal_err_pct", "floor_penetration_mm"):
             print(f"{name}_{key}={m.get(key)}")
         print(f"{name}_seconds={dt:.1f}")
         sys.stdout.flush()

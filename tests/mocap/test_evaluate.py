@@ -90,11 +90,29 @@ def test_jitter_and_bone_cv_known_values():
     assert np.count_nonzero(cv) == 1
 
 
+def test_joint_angles_known_values():
+    """A T-pose has straight elbows (0 deg); bending the left forearm up by 90 deg shows as 90 deg at the
+    left wrist joint and nowhere else; a rigid rotation of the whole body changes no joint angle."""
+    j = np.broadcast_to(sk.tpose(), (2, sk.N_JOINTS, 3)).copy()
+    kids = [k for k in range(1, sk.N_JOINTS) if sk.PARENTS[k] > 0]
+    at = {sk.JOINT_NAMES[k]: i for i, k in enumerate(kids)}
+    assert m.joint_angles(j)[0, at["left_wrist"]] == pytest.approx(0.0, abs=1e-6)
+    lw, le = sk.JOINT_INDEX["left_wrist"], sk.JOINT_INDEX["left_elbow"]
+    bent = j.copy()
+    bent[1, lw] = bent[1, le] + np.array([0.0, np.linalg.norm(j[1, lw] - j[1, le]), 0.0])
+    err = m.joint_angle_error(bent, j)
+    assert err[1, at["left_wrist"]] == pytest.approx(90.0, abs=1e-6)
+    assert np.count_nonzero(err > 1e-6) == 1
+    c, s_ = np.cos(0.7), np.sin(0.7)
+    rot = j @ np.array([[c, 0, s_], [0, 1, 0], [-s_, 0, c]]).T + 3.0
+    assert np.allclose(m.joint_angle_error(rot, j), 0.0, atol=1e-6)
+
+
 # --- evaluate.metrics -----------------------------------------------------------------------------
 def test_exact_motion_scores_zero(scene):
     res, err = evaluate(scene, scene["joints"])
     assert res["frames"] == N and res["video_fps"] == FPS and res["tracked_pct"] == 100.0
-    for k in ("mpjpe_mm", "mpjpe_root_mm", "pa_mpjpe_mm", "accel_error_m_s2", "reprojection_px_median",
+    for k in ("mpjpe_mm", "mpjpe_root_mm", "pa_mpjpe_mm", "joint_angle_err_deg", "accel_error_m_s2", "reprojection_px_median",
               "reprojection_px_p95", "error_2d_px_median", "error_2d_px_p95"):
         assert res[k] == pytest.approx(0.0, abs=1e-3), k
     assert res["alignment_scale"] == pytest.approx(1.0) and res["alignment_rotation_deg"] == pytest.approx(0.0, abs=1e-3)

@@ -160,6 +160,24 @@ def bone_length_cv(joints: np.ndarray) -> np.ndarray:
         return np.where(mean > 0, std / mean, np.nan)
 
 
+def joint_angles(joints: np.ndarray) -> np.ndarray:
+    """Angle at each joint between its parent bone and its own bone, ``(n, J, 3)`` -> ``(n, K)`` degrees, for the
+    ``K`` joints whose parent is not the root (0: straight on, 180: folded back): elbow and knee flexion, the
+    shoulder's and hip's angle to the girdle, the neck's and head's bend. Needs no alignment."""
+    j = np.asarray(joints, dtype=np.float64)
+    kids = np.array([k for k in range(1, j.shape[1]) if PARENTS[k] > 0])
+    a = j[:, kids] - j[:, PARENTS[kids]]
+    b = j[:, PARENTS[kids]] - j[:, PARENTS[PARENTS[kids]]]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c = np.sum(a * b, axis=-1) / (np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1))
+    return np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
+
+
+def joint_angle_error(pred: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """``|angle(pred) - angle(truth)|`` per frame and joint (:func:`joint_angles`), ``(n, K)`` degrees."""
+    return np.abs(joint_angles(pred) - joint_angles(truth))
+
+
 # ---------------------------------------------------------------------------------------------------
 # image-space errors
 # ---------------------------------------------------------------------------------------------------

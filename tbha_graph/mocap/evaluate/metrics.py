@@ -23,6 +23,9 @@ With ground truth (``truth`` connected and not ``{}``):
 * ``mpjpe_root_mm``: root-relative (hips subtracted per frame), no alignment: meaningful when the
   calibrated world axes match the truth's (e.g. a known camera); includes the root (error 0).
 * ``pa_mpjpe_mm``: each frame aligned separately with a similarity (Procrustes), root-free shape error.
+* ``joint_angle_err_deg``: mean |angle - truth's angle| over frames and the joints whose parent is not the
+  root, the angle at a joint being that between its parent bone and its own (elbow and knee flexion, the
+  limbs' angle to the girdles, the neck's and head's bend); no alignment.
 * ``error_2d_px_median`` / ``_p95``: the tracks' 2D points (tracked or predicted) vs the truth's
   ``joints2d`` (rescaled to the tracks' image size), for joints the truth marks visible.
 * ``accel_error_m_s2``: mean |acceleration - truth's acceleration| (second difference x fps^2), world
@@ -130,6 +133,7 @@ def truth_figures(joints: np.ndarray, fps: float, truth: dict, alignment: str) -
         "pa_mpjpe_mm": _figure(m.nan_mean(err_pa)),
         "accel_error_m_s2": _figure(m.accel_error(aligned, gt, fps)),
         "root_mpjpe_mm": _figure(m.nan_mean(err[:, 0])),
+        "joint_angle_err_deg": _figure(m.nan_mean(m.joint_angle_error(joints, gt))),
         "lag_ms": _figure(1000.0 * m.lag_frames(aligned, gt) / fps),
         "truth_jitter_m_s3": _figure(m.jitter(gt, fps)),
         "per_joint_mpjpe_mm": {name: _figure(v) for name, v in zip(JOINT_NAMES, per_joint)},
