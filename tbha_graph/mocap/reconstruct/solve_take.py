@@ -14,9 +14,12 @@ This node finds, for the whole take at once (model and residuals: :mod:`.take_mo
 Method. Levenberg–Marquardt on the whole take's block normal equations (:func:`.take_model.normal_equations`:
 frame blocks banded, globals by a Schur complement, so each step costs time linear in the frames) over
 residuals divided by their standard deviations: robust (soft-L1) reprojection of every tracked point,
-joint-acceleration smoothness, near-rigid torso, knee/elbow hinge limits, floor contact (planted ankles —
-found from the image, where a planted ankle stands still — at rest height within a 3 cm roll band and not
-sliding; no ankle below the floor), a weak pose prior (head along the neck, pelvis facing as the thorax).
+joint-acceleration smoothness (tighter for the torso's joints, ``sigma_acc_torso``: the image fixes the
+body's depth only weakly, and the hips do not jerk), near-rigid torso, knee/elbow hinge limits, floor
+contact (planted ankles — found from the image, where a planted ankle stands still — at rest height within
+a 3 cm roll band and not sliding; no ankle below the floor), a weak pose prior (head along the neck) and a
+twist prior (the pelvis faces where the thorax faces, ``sigma_twist`` about 11 degrees: walking twists them
+5-15 degrees apart; without it a pelvis tipped to its mirror depth side costs nothing).
 
 1. **Starts.** For each starting focal length (``focal_grid`` × image width, a weak log-normal prior
    around ``focal_prior_width`` × width), or the given ``focal_px``: a first skeleton from the seed's
@@ -30,7 +33,11 @@ sliding; no ankle below the floor), a weak pose prior (head along the neck, pelv
 4. **Whole take.** Every frame from the subsample's solution (interpolated), LM with focal and floor free.
    The start with the lowest whole-take cost wins; its depth sides are then re-solved at the other starts'
    focal lengths (``cross_seed``). Another start within 5 % of the best cost at a clearly different focal
-   length is reported as a warning: the take cannot tell them apart.
+   length is reported as a warning: the take cannot tell them apart. These starts run under the weaker
+   priors (``select_sigma_twist``, no torso acceleration prior): measured on four renders, the tighter ones
+   pulled the choice 20-100 % off, since a metric prior's cost scales with the focal length.
+   With the focal length chosen (or given), the pose is solved at it under the full priors: LM, the
+   depth-side search, LM.
 5. **World frame.** y up = the floor normal, origin on the floor below the hips on the first frame, z the
    actor's forward on the first frame made horizontal (the actor faces +z in the T-pose).
 
@@ -55,7 +62,7 @@ from ..camera import Camera
 from ..ports import BODY, CAMERA, MOTION, SIDES, TRACKS2D, report_port
 from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS
 from ..body import DEFAULT_ANKLE_HEIGHT, body_lengths, lengths_to_body, tpose_on_floor
-from .take_model import (ANKLES, DEFAULT_POINT_OFFSETS, PER_FRAME, TORSO_PAIRS, TakeData, TakeProblem, Weights,
+from .take_model import (ANKLES, DEFAULT_POINT_OFFSETS, TORSO_PAIRS, TakeData, TakeProblem, Weights,
                          bone_directions, fronts, pack_initial, point_positions, unit, levenberg_marquardt)
 from .take_model import search_sides_lm as search_sides
 from .temporal_ray_sphere import TemporalRaySphereParams, solve_temporal
@@ -74,12 +81,15 @@ class SolveTakeParams(BaseModel):
     calib_iterations: int = Field(10, ge=1, description="Levenberg-Marquardt iterations per start on the frame subsample")
     sigma_px: float = Field(1.0, gt=0, description="2D tracking noise", json_schema_extra={"unit": "px"})
     sigma_acc: float = Field(30.0, gt=0, description="typical joint acceleration (smoothness prior)", json_schema_extra={"unit": "m/s^2"})
+    sigma_twist: float = Field(0.2, gt=0, description="pelvis-thorax twist prior: difference of their unit forward vectors (0.2: about 11 degrees; walking twists 5-15)")
+    sigma_acc_torso: float | None = Field(5.0, gt=0, description="torso joints' (hips, spine, shoulders, hip joints) acceleration prior, tighter than the limbs' (walking moves the hips at 2-3 m/s^2): it steadies the body's depth, which the image fixes only weakly; None: sigma_acc", json_schema_extra={"unit": "m/s^2"})
     ankle_height: float = Field(DEFAULT_ANKLE_HEIGHT, ge=0, le=0.3, description="ankle joint height above the floor when standing", json_schema_extra={"unit": "m"})
     points: Literal["suit", "joints"] = Field("suit", description="what the tracks mark: 'suit' patches on the body "
                                               "surface (modelled off the joint centres) or 'joints' (detector keypoints)")
     free_offsets: bool = Field(False, description="estimate where each tracked point sits on the body (else the suit defaults)")
     free_lengths: bool = Field(False, description="refine the bone lengths from the take around the body's (3 % prior); measured on the sample: no better, so off")
     side_search: bool = Field(True, description="re-decide limbs' depth sides over time segments by total cost")
+    select_sigma_twist: float = Field(0.5, gt=0, description="twist prior while the focal length is chosen (no torso acceleration prior then): measured on 4 renders, the tighter pose priors pull the choice 20-100 % off")
     cross_seed: bool = Field(True, description="re-solve the best start's depth sides at the other starts' focal lengths")
 
 
@@ -224,7 +234,7 @@ def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: Solve
     contact = np.asarray(contact, dtype=bool)
     data = TakeData(points, weight, lengths, centre, fps, p.ankle_height, contact,
                     rest_pair_distances(lengths, p.ankle_height))
-    w = Weights(sigma_px=p.sigma_px, sigma_acc=p.sigma_acc)
+    w = Weights(sigma_px=p.sigma_px, sigma_acc=p.sigma_acc, sigma_twist=p.sigma_twist, sigma_acc_torso=p.sigma_acc_torso)
     offsets = DEFAULT_POINT_OFFSETS.copy() if p.points == "suit" else np.zeros_like(DEFAULT_POINT_OFFSETS)
     return TakeProblem(data, bone_directions(P), nf, w, offsets, free_offsets=free_offsets,
                        focal_prior=focal_prior, free_lengths=p.free_lengths), d
@@ -303,10 +313,14 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
     if p.focal_px is not None:
         starts, focal_prior = [float(p.focal_px)], (float(p.focal_px), 1e-4)
         report["focal_source"] = "given"
+        q = p
     else:
         # weak prior: lenses of ordinary cameras have f ~ 0.8-1.9 x the image width (log-normal around 1.2 W)
         starts, focal_prior = [m * width for m in p.focal_grid], (p.focal_prior_width * width, p.focal_prior_log_sd)
         report["focal_source"] = "estimated from the take"
+        # the focal length is chosen under the weaker priors (the torso's acceleration prior is metric, so it
+        # scales with the focal length and pulls the choice); the pose is then solved at it with p's priors
+        q = p.model_copy(update={"sigma_twist": p.select_sigma_twist, "sigma_acc_torso": None})
     contact = contacts_from_image(points, tracked, fps)
     report["planted_pct"] = [round(float(c) * 100, 1) for c in contact.mean(axis=0)]
     best, sweep, kept1 = None, [], 0
@@ -316,13 +330,13 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
         except (NodeError, ValueError):
             continue
         g0 = globals_vector(f0, float(-cam.R[:, 1] @ cam.t), False, p.free_lengths)
-        probs, xs, _, _, kept = solve_frames(points[sub], weight[sub], lengths, centre, fps / step, P0[sub], cam, g0, p,
+        probs, xs, _, _, kept = solve_frames(points[sub], weight[sub], lengths, centre, fps / step, P0[sub], cam, g0, q,
                                              p.calib_iterations, False, focal_prior, p.side_search, contact[sub])
         g_sub = probs.globals_of(xs)
         nf0, d0 = probs.floor(g_sub)
         P1 = interpolate_joints(probs.solution(xs)[4], sub, n)
         gs = np.concatenate([g_sub[:1], [0.0, 0.0, d0], g_sub[4:]])
-        prob_k, x_k, cost_k, ne_k, _ = solve_frames(points, weight, lengths, centre, fps, P1, (nf0, d0), gs, p,
+        prob_k, x_k, cost_k, ne_k, _ = solve_frames(points, weight, lengths, centre, fps, P1, (nf0, d0), gs, q,
                                                     p.max_iterations, False, focal_prior, False, contact)
         f_end = float(np.exp(prob_k.globals_of(x_k)[0]))
         sweep.append([round(f0, 1), round(f_end, 1), round(cost_k, 1)])
@@ -347,16 +361,14 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
             scale = f_end / f_best
             gs = np.concatenate([[np.log(f_end), 0.0, 0.0, d_b * scale], prob.globals_of(x)[4:]])
             prob_k, x_k, cost_k, ne_k, _ = solve_frames(points, weight, lengths, centre, fps, P_b * scale,
-                                                        (nf_b, d_b * scale), gs, p, p.max_iterations, False,
+                                                        (nf_b, d_b * scale), gs, q, p.max_iterations, False,
                                                         focal_prior, False, contact)
             cross.append([round(f_end, 1), round(float(np.exp(prob_k.globals_of(x_k)[0])), 1), round(cost_k, 1)])
             if cost_k < cost:
                 cost, prob, x, ne = cost_k, prob_k, x_k, ne_k
         report["focal_cross_seeded"] = cross
         sweep = sweep + cross
-    f, nf, d, offs, P = prob.solution(x)
     # uncertainty of the focal length (log f) from the normal equations, scaled by the fit's residual level
-    terms = prob.term_costs(x)
     dof = max(prob.residuals(x).size - x.size, 1)
     scale = max(2.0 * cost / dof, 1e-12)
     try:
@@ -364,6 +376,13 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
         focal_sd_pct = float(np.sqrt(max(cov[0, 0], 0.0)) * 100.0)
     except Exception:  # noqa: BLE001 - a singular system: the focal length is not determined
         focal_sd_pct = float("inf")
+    if q is not p:  # the pose at the chosen focal length under p's priors: LM, depth sides, LM (focal held)
+        f_sel, nf_s, d_s, _, P_s = prob.solution(x)
+        g_s = np.concatenate([[np.log(f_sel), 0.0, 0.0, d_s], prob.globals_of(x)[4:]])
+        prob, x, cost, ne, _ = solve_frames(points, weight, lengths, centre, fps, P_s, (nf_s, d_s), g_s, p,
+                                            p.max_iterations, False, (f_sel, 1e-4), p.side_search, contact)
+    f, nf, d, offs, P = prob.solution(x)
+    terms = prob.term_costs(x)
     B, origin = world_frame(P, nf, d)
     K = np.array([[f, 0.0, centre[0]], [0.0, f, centre[1]], [0.0, 0.0, 1.0]])
     camera = Camera(K=K, R=B, t=origin, width=width, height=height)

@@ -74,6 +74,9 @@ DEFAULT_POINT_OFFSETS = np.array([
     [-0.021, 0.048],  # right_ankle
 ])
 
+#: Joints of the near-rigid torso (their acceleration may have its own, tighter prior).
+TORSO_JOINTS = np.array([J[n] for n in ("hips", "chest", "neck", "left_shoulder", "right_shoulder", "left_hip", "right_hip")])
+
 #: Torso joint pairs kept at their rest distance (near-rigid torso), as index arrays.
 TORSO_PAIRS = np.array([(J[a], J[b]) for a, b in (
     ("left_shoulder", "right_shoulder"), ("left_hip", "right_hip"), ("left_shoulder", "hips"),
@@ -152,12 +155,14 @@ class Weights:
 
     sigma_px: float = 1.0        # reprojection, pixels
     sigma_acc: float = 30.0      # joint acceleration, m/s^2
+    sigma_acc_torso: float | None = None  # torso joints' acceleration (hips, chest, neck, shoulders, hip joints), m/s^2; None: sigma_acc
     sigma_torso: float = 0.05    # torso distances, metres (the real torso bends)
     sigma_hinge: float = 0.05    # wrong-way bending (unit vectors' dot product)
     sigma_floor: float = 0.01    # ankle below the floor / planted ankle off it, metres
     sigma_slide: float = 0.005   # planted ankle moving per frame, metres
     sigma_length: float = 0.03  # free bone lengths around the body's (log, i.e. relative)
-    sigma_pose: float = 0.5      # weak pose prior: head along the neck, pelvis facing as the thorax (unit vectors)
+    sigma_pose: float = 0.5      # weak pose prior: head along the neck (unit vectors)
+    sigma_twist: float = 0.5     # pelvis facing as the thorax (unit vectors; 0.2 is about 11 degrees of twist)
     contact_band: float = 0.03   # a planted ankle may rise this far above its standing height (heel and toe roll), metres
     sigma_offset: float = 0.03   # point offsets around their defaults, metres
     robust_scale: float = 2.0    # reprojection residuals beyond this many sigmas count as soft-L1 (outliers)
@@ -287,7 +292,7 @@ class TakeProblem:
         below = np.minimum(h, 0.0) / w.sigma_floor
         on = np.where(d.contact, np.maximum(h - w.contact_band, 0.0), 0.0) / w.sigma_floor
         head = (unit(P[:, J["head"]] - P[:, J["neck"]]) - unit(P[:, J["neck"]] - P[:, J["chest"]])) / w.sigma_pose
-        twist = (pelvis - thorax) / w.sigma_pose
+        twist = (pelvis - thorax) / w.sigma_twist
         return np.concatenate([rep, torso, np.stack(hin, axis=1), below, on, head, twist], axis=1)
 
     def slide_vectors(self, P: np.ndarray, nf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -303,8 +308,15 @@ class TakeProblem:
                 both &= ~np.asarray(self.d.breaks, dtype=bool)[:, None]
         return step, both
 
+    def acc_scale(self) -> np.ndarray:
+        """``(48,)`` factor turning each joint coordinate's second difference (m per frame²) into sigma units."""
+        sig = np.full(N_JOINTS, self.w.sigma_acc)
+        if self.w.sigma_acc_torso is not None:
+            sig[TORSO_JOINTS] = self.w.sigma_acc_torso
+        return np.repeat(self.d.fps ** 2 / sig, 3)
+
     def coupled_terms(self, P: np.ndarray, nf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        acc = (P[2:] - 2.0 * P[1:-1] + P[:-2]).reshape(max(self.n - 2, 0), -1) * (self.d.fps ** 2 / self.w.sigma_acc)
+        acc = (P[2:] - 2.0 * P[1:-1] + P[:-2]).reshape(max(self.n - 2, 0), -1) * self.acc_scale()
         acc = acc * self.d.acc_mask()[:, None]
         step, both = self.slide_vectors(P, nf)
         slide = np.where(both, np.linalg.norm(step, axis=-1), 0.0) / self.w.sigma_slide
@@ -451,13 +463,14 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray, h: float = 1e-6) -> tup
     up2 = np.zeros((n, m, m))
     acc, slide = prob.coupled_terms(P0, nf)
     if n > 2:
-        s = prob.d.fps ** 2 / prob.w.sigma_acc
+        s = prob.acc_scale()
+        dPs = dP * s[None, :, None]
         c = (1.0, -2.0, 1.0)
         mask = prob.d.acc_mask()[:, None, None]
         for k in range(3):
-            bf[k:n - 2 + k] += c[k] * s * np.einsum("tmi,tm->ti", dP[k:n - 2 + k], acc)
+            bf[k:n - 2 + k] += c[k] * np.einsum("tmi,tm->ti", dPs[k:n - 2 + k], acc)
             for l in range(k, 3):
-                blk = mask * c[k] * c[l] * s * s * np.einsum("tmi,tmj->tij", dP[k:n - 2 + k], dP[l:n - 2 + l])
+                blk = mask * c[k] * c[l] * np.einsum("tmi,tmj->tij", dPs[k:n - 2 + k], dPs[l:n - 2 + l])
                 if l == k:
                     diag[k:n - 2 + k] += blk
                 elif l - k == 1:
@@ -495,10 +508,10 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray, h: float = 1e-6) -> tup
         C = np.einsum("tri,trg->tig", dR, Jf)
         if n > 2:  # accelerations depend on globals too when bone lengths are free
             Ja = Jg[n * F: n * F + (n - 2) * N_JOINTS * 3].reshape(n - 2, N_JOINTS * 3, G)
-            s_acc = prob.d.fps ** 2 / prob.w.sigma_acc
+            s_acc = prob.acc_scale()[None, :, None]
             am = prob.d.acc_mask()[:, None, None]
             for k, ck in enumerate((1.0, -2.0, 1.0)):
-                C[k:n - 2 + k] += ck * s_acc * np.einsum("tmi,tmg->tig", dP[k:n - 2 + k], Ja * am)
+                C[k:n - 2 + k] += ck * np.einsum("tmi,tmg->tig", dP[k:n - 2 + k] * s_acc, Ja * am)
         base = n * F + max(n - 2, 0) * N_JOINTS * 3
         Js = Jg[base: base + 2 * n].reshape(n, 2, G)
         C += np.einsum("tai,tag->tig", d_now, Js)
