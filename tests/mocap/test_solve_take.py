@@ -167,11 +167,11 @@ def test_solver_on_the_sample_tracks_given_the_focal_length(truth, tmp_path):
     aligned, _ = align_clip(out["joints"], gt, "rigid")
     seq = np.linalg.norm(aligned - gt, axis=-1).mean() * 1000
     assert seq < SAMPLE_SEQ_BOUND_MM
-    assert abs(out["report"]["camera_height_m"] - 1.45) < 0.01  # measured 1.446 m
-    assert out["joints"][:, [12, 15], 1].min() > 0.08 - 0.003  # measured 0.4 mm below its resting height at worst
+    assert abs(out["report"]["camera_height_m"] - 1.45) < 0.011  # measured 1.443 m
+    assert out["joints"][:, [12, 15], 1].min() > 0.08 - 0.003  # measured 0.5 mm below its resting height at worst
 
 
-SAMPLE_SEQ_BOUND_MM = 78.0  # measured 52.4 mm
+SAMPLE_SEQ_BOUND_MM = 72.0  # measured 47.7 mm
 
 
 def test_twist_prior_measures_the_pelvis_turned_from_the_thorax(truth):

@@ -376,8 +376,8 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
         focal_sd_pct = float(np.sqrt(max(cov[0, 0], 0.0)) * 100.0)
     except Exception:  # noqa: BLE001 - a singular system: the focal length is not determined
         focal_sd_pct = float("inf")
-    if q is not p:  # the pose at the chosen focal length under p's priors: LM, depth sides, LM (focal held)
-        f_sel, nf_s, d_s, _, P_s = prob.solution(x)
+    if q is not p or p.side_search:  # the pose at the chosen focal length under p's priors: LM, the depth-side
+        f_sel, nf_s, d_s, _, P_s = prob.solution(x)  # search on the whole take, LM (focal held)
         g_s = np.concatenate([[np.log(f_sel), 0.0, 0.0, d_s], prob.globals_of(x)[4:]])
         prob, x, cost, ne, _ = solve_frames(points, weight, lengths, centre, fps, P_s, (nf_s, d_s), g_s, p,
                                             p.max_iterations, False, (f_sel, 1e-4), p.side_search, contact)
