@@ -11,7 +11,7 @@ from tbha_graph.mocap.color.lab import lab
 from tbha_graph.mocap.bundles.colors import ColorModel, as_color_model
 from tbha_graph.mocap.color.rg_chromaticity import rg_chromaticity
 from tbha_graph.mocap.color.spaces import SPACES, convert, rg_chromaticity as rg
-from tbha_graph.mocap.segment.labels import PixelClassifier
+from tbha_graph.mocap.segment.labels import PixelClassifier, class_mask
 from tbha_graph.mocap.suit import load_suit
 
 NODES = {"rg": rg_chromaticity, "hsv": hsv, "lab": lab}
@@ -80,6 +80,26 @@ def test_color_model_classifies_suit_colours(space):
     lab_ = clf.labels(white)
     assert lab_[0, 0] == 0 and lab_[0, 1] == 0  # suit (lit or shaded) is no patch
     assert lab_[0, 2] == len(model.classes)  # dark: the head class
+
+
+@pytest.mark.parametrize("space", SPACES)
+@pytest.mark.parametrize("shape", [(1, 1), (1, 4), (4, 1), (1, 3), (2, 2), (5, 7)])
+def test_labels_and_masks_keep_the_image_shape(space, shape):
+    """Any image size, 1x1 included, gives labels and masks of its own shape with the same values. OpenCV's
+    array-with-Python-scalar operations change shape for tiny arrays between versions (5.1 returns a 1x1
+    image times 3 as (4, 1), 5.0 refuses cv2.compare on it): the classifier must not depend on that."""
+    clf = PixelClassifier(run_node(NODES[space])["model"])
+    rng = np.random.default_rng(3)
+    big = rng.integers(0, 256, (40, 40, 3), dtype=np.uint8)
+    ref = clf.labels(big)
+    img = np.ascontiguousarray(big[: shape[0], : shape[1]])
+    lab_ = clf.labels(img)
+    assert lab_.shape == shape and lab_.dtype == np.uint8
+    np.testing.assert_array_equal(lab_, ref[: shape[0], : shape[1]])
+    for c in range(len(clf.model.classes)):
+        m = class_mask(lab_, c)
+        assert m.shape == shape and m.dtype == np.uint8
+        np.testing.assert_array_equal(m, np.where(lab_ == c + 1, 255, 0))
 
 
 def test_model_round_trips_as_json():

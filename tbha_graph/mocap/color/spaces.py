@@ -109,7 +109,8 @@ def index_planes(space: str, bgr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     ``index = i1 << 8 | i2`` addresses a 256 x 256 lookup table over two 8-bit chroma coordinates
     (:func:`index_chroma` gives the chroma of each entry); ``luma3`` is 3 x the space's luma (0..765).
-    Integer OpenCV arithmetic only (about 0.5 ms for rg on 640x480 here), no float temporaries:
+    Integer arithmetic only (about 0.5 ms for rg on 640x480 here), no float temporaries, and no OpenCV
+    array-with-Python-scalar operations (their shape rules for tiny arrays differ between OpenCV 5.0 and 5.1):
 
     * rg: ``i1 = round(255 R / (R+G+B))``, ``i2 = round(255 G / (R+G+B))``, ``luma3 = R+G+B``;
     * hsv: ``i1 = H`` (0..179), ``i2 = S``, ``luma3 = 3 V``;
@@ -129,7 +130,10 @@ def index_planes(space: str, bgr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             i1, i2, luma = x.astype(np.uint16), y.astype(np.uint16), z
         else:
             i1, i2, luma = y.astype(np.uint16), z.astype(np.uint16), x
-        luma3 = cv2.multiply(luma, 3, dtype=cv2.CV_16U)
+        # numpy, not cv2.multiply(luma, 3): OpenCV 5.1 takes a 1x1 array with a Python scalar for a 4-vector
+        # (the result comes back (4, 1)), OpenCV 5.0 refuses it
+        luma3 = luma.astype(np.uint16)
+        luma3 *= 3
     else:
         raise ValueError(f"unknown colour space {space!r}; known: {', '.join(SPACES)}")
     i1 <<= 8

@@ -84,7 +84,10 @@ class PixelClassifier:
 def class_mask(labels: np.ndarray, cls: int, close_px: int = 0) -> np.ndarray:
     """Mask (uint8 0/255) of class ``cls`` (0-based) in a label image; ``close_px`` > 0 fills holes and
     gaps smaller than that (a morphological closing by a square of that size)."""
-    mask = cv2.compare(labels, cls + 1, cv2.CMP_EQ)
+    # numpy, not cv2.compare(labels, cls + 1): with a Python scalar OpenCV 5.0 refuses a 1x1 image and
+    # OpenCV 5.1 returns a (4, 1) mask for it
+    mask = np.equal(labels, cls + 1).astype(np.uint8)
+    mask *= 255
     if close_px > 0:
         mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((close_px, close_px), np.uint8))
     return mask
