@@ -90,6 +90,8 @@ class SolveTakeParams(BaseModel):
         None, description="where each tracked point sits off its joint: 16 rows (along, out) metres, joint order; None: "
                           "the tracks' own 'point_offsets' if they carry them (a detector's calibrated offsets), else the "
                           "suit's defaults (points: suit) or zeros (points: joints)")
+    confidence_power: float = Field(0.0, ge=0, le=4, description="each tracked point's weight times the tracks' "
+                                    "confidence to this power (0: off; detector keypoints carry one, e.g. MediaPipe's visibility)")
     free_offsets: bool = Field(False, description="estimate where each tracked point sits on the body (else the suit defaults)")
     free_lengths: bool = Field(False, description="refine the bone lengths from the take around the body's (3 % prior); measured on the sample: no better, so off")
     side_search: bool = Field(True, description="re-decide limbs' depth sides over time segments by total cost")
@@ -311,13 +313,15 @@ def world_frame(P: np.ndarray, nf: np.ndarray, d: float) -> tuple[np.ndarray, np
 
 
 def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarray, width: int, height: int,
-                      fps: float, p: SolveTakeParams, progress=None) -> dict:
+                      fps: float, p: SolveTakeParams, progress=None, confidence: np.ndarray | None = None) -> dict:
     """The whole solve (see the module docstring) on 2D points ``(n, 16, 2)`` px. Returns a dict with
     ``joints`` (n, 16, 3) world metres, ``camera`` (:class:`Camera`), ``sides`` (n, 16) int8, ``report``."""
     t0 = time.perf_counter()
     n = points.shape[0]
     centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
     weight = tracked.astype(np.float64)
+    if p.confidence_power > 0 and confidence is not None:
+        weight = weight * np.clip(np.nan_to_num(np.asarray(confidence, dtype=np.float64)), 0.0, 1.0) ** p.confidence_power
     report: dict = {"frames": n}
     warnings_out: list[str] = []
     # for each starting focal length (or the known one): a first skeleton; on a frame subsample spread over
@@ -458,8 +462,11 @@ def solve_take(ctx, tracks, body):
         # a detector's calibrated landmark offsets travel with its tracks (detect.mediapipe_pose)
         p = p.model_copy(update={"point_offsets": np.asarray(tracks["point_offsets"], dtype=np.float64).tolist()})
         ctx.log("point offsets from the tracks (the detector's calibrated offsets)")
+    confidence = tracks.get("confidence") if isinstance(tracks, dict) else None
+    if p.confidence_power > 0 and confidence is None:
+        ctx.log("confidence_power is set but the tracks carry no confidence: every tracked point weighs the same")
     out = solve_take_arrays(tr.points, tr.tracked, lengths, tr.width, tr.height, float(tr.fps), p,
-                            progress=lambda k, total: ctx.log(f"stage {k}/{total}"))
+                            progress=lambda k, total: ctx.log(f"stage {k}/{total}"), confidence=confidence)
     rep = out["report"]
     ctx.log(f"focal {rep['focal_px']:.0f} px (± {rep['focal_sd_pct']:.1f} %), camera {rep['camera_height_m']:.2f} m high, "
             f"{rep['camera_distance_m']:.2f} m away, tilt {rep['camera_tilt_deg']:.1f}°; {rep['solve_seconds']:.1f} s")

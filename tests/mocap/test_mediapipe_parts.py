@@ -1,0 +1,159 @@
+"""The parts of detect.mediapipe_pose that need no MediaPipe: consistent left/right labels, the landmark
+offsets fit and table, the reader thread, the solver's point_offsets / confidence_power params."""
+from __future__ import annotations
+
+import json
+import threading
+
+import cv2
+import numpy as np
+import pytest
+
+from tbha_graph.core.errors import NodeError
+from tbha_graph.mocap.detect.landmark_offsets import OFFSETS_FILE, body_axes, fit_point_offsets, load_mediapipe_offsets
+from tbha_graph.mocap.detect.left_right import GROUPS, apply_sides, consistent_sides, mirror_pairs
+from tbha_graph.mocap.detect.mediapipe_pose import prefetched_rgb_frames
+from tbha_graph.mocap.io.keypoint_layouts import MEDIAPIPE_POSE
+from tbha_graph.mocap.io.video import iter_frames, probe_video
+from tbha_graph.mocap.reconstruct.solve_take import SolveTakeParams, point_offsets_of
+from tbha_graph.mocap.skeleton import JOINT_NAMES
+
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+TRUTH = ROOT / "data" / "sample" / "ground_truth.npz"
+
+
+def _landmarks_walking(n=120, seed=0):
+    """33 image landmarks (px) of a figure facing the camera that sways and moves its limbs smoothly:
+    the person's left on the image's right."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / 30.0
+    base = np.zeros((n, MEDIAPIPE_POSE.size, 2))
+    cx = 320 + 40 * np.sin(0.7 * t)
+    for name in MEDIAPIPE_POSE.landmarks:
+        k = MEDIAPIPE_POSE.index(name)
+        side = 1.0 if ("left" in name) else (-1.0 if "right" in name else 0.0)
+        part = name.split("_", 1)[-1]
+        width = {"shoulder": 40, "elbow": 70, "wrist": 95, "pinky": 100, "index": 102, "thumb": 98, "hip": 22, "knee": 25,
+                 "ankle": 27, "heel": 26, "foot_index": 30}.get(part, 8)
+        height = {"shoulder": 150, "elbow": 190, "wrist": 230, "pinky": 240, "index": 242, "thumb": 238, "hip": 270,
+                  "knee": 350, "ankle": 430, "heel": 435, "foot_index": 440}.get(part, 110)
+        swing = 12 * np.sin(2.0 * t + (0 if side > 0 else np.pi)) if part not in ("shoulder", "hip") else 0.0
+        base[:, k, 0] = cx + side * width + swing
+        base[:, k, 1] = height + 0.3 * swing
+    return base + rng.normal(0, 1.0, base.shape)
+
+
+def _swap_stretches(lm, stretches, groups=GROUPS):
+    n = lm.shape[0]
+    truth = {g: np.zeros(n, bool) for g in GROUPS}
+    for g in groups:
+        for a, b in stretches:
+            truth[g][a:b] = True
+    return apply_sides(lm, truth), truth
+
+
+def test_swapped_stretches_are_swapped_back():
+    lm = _landmarks_walking()
+    # a detector that takes the person to face away in stretches (the T-pose start included), limb groups apart
+    bad, truth = _swap_stretches(lm, [(0, 30), (55, 70)])
+    truth["legs"][90:100] = ~truth["legs"][90:100]
+    bad = apply_sides(bad, {"legs": np.isin(np.arange(len(lm)), np.arange(90, 100))})
+    got = consistent_sides(bad, np.ones(len(lm), bool))
+    for g in GROUPS:
+        np.testing.assert_array_equal(got[g], truth[g], err_msg=g)
+    np.testing.assert_allclose(apply_sides(bad, got), lm)
+    # the detector's own labels as the start: the same path up to the first frame's choice
+    det = consistent_sides(bad, np.ones(len(lm), bool), start="detector")
+    assert not det["arms"][0] and (det["arms"] != truth["arms"]).all()
+
+
+def test_undetected_frames_are_skipped_and_pairs_cover_every_side():
+    lm = _landmarks_walking()
+    bad, truth = _swap_stretches(lm, [(40, 80)])
+    detected = np.ones(len(lm), bool)
+    detected[35:45] = False
+    bad[35:45] = np.nan
+    got = consistent_sides(bad, detected)
+    np.testing.assert_array_equal(got["arms"][detected], truth["arms"][detected])
+    pairs = [i for g in mirror_pairs(MEDIAPIPE_POSE).values() for p in g for i in p]
+    sided = [MEDIAPIPE_POSE.index(n) for n in MEDIAPIPE_POSE.landmarks if "left" in n or "right" in n]
+    assert sorted(pairs) == sorted(sided)  # every left/right landmark belongs to exactly one pair
+
+
+def test_offsets_fit_recovers_known_offsets_through_a_camera():
+    with np.load(TRUTH) as z:
+        P, K = z["joints3d_cam"], z["K"]
+    true = np.zeros((16, 2))
+    true[:, 0] = np.linspace(-0.03, 0.03, 16)
+    true[:, 1] = np.linspace(0.04, -0.02, 16)
+    for j, n in enumerate(JOINT_NAMES):  # mirror symmetric, as the fit assumes
+        if n.startswith("right_"):
+            true[j] = true[JOINT_NAMES.index(n.replace("right_", "left_"))]
+    axis, out = body_axes(P)
+    X = P + true[None, :, 0:1] * axis + true[None, :, 1:2] * out
+    uv = X[..., :2] / X[..., 2:3] * K[0, 0] + K[:2, 2]
+    rng = np.random.default_rng(1)
+    obs = uv + rng.normal(0, 0.5, uv.shape)
+    obs[::17, 5] += 40.0  # outliers are dropped
+    got, stats = fit_point_offsets([P], [K], [obs], [np.ones(obs.shape[:2], bool)])
+    np.testing.assert_allclose(got[:, 0], true[:, 0], atol=0.004)  # along: well seen
+    np.testing.assert_allclose(got[:, 1], true[:, 1], atol=0.02)   # out: mostly along the line of sight here
+    assert all(stats[n]["px_median_after"] < 0.6 for n in JOINT_NAMES)
+
+
+def test_shipped_offsets_table_loads_and_says_how_it_was_fitted(tmp_path):
+    offs = load_mediapipe_offsets()
+    assert offs.shape == (16, 2) and np.abs(offs).max() < 0.1
+    doc = json.loads(OFFSETS_FILE.read_text())
+    assert {"how", "command", "renders", "fitted", "residual_px_median_per_axis"} <= set(doc)
+    assert len(doc["renders"]) >= 3 and all(r["frames"] > 30 for r in doc["renders"])
+    with pytest.raises(NodeError, match="missing"):
+        load_mediapipe_offsets(tmp_path / "none.json")
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"offsets_m": {"hips": {"along": 0.0}}}))
+    with pytest.raises(NodeError, match="not a landmark offsets table"):
+        load_mediapipe_offsets(bad)
+
+
+def test_solver_point_offsets_param_and_tracks_offsets():
+    assert np.count_nonzero(point_offsets_of(SolveTakeParams(points="joints"))) == 0
+    rows = np.full((16, 2), 0.01).tolist()
+    np.testing.assert_allclose(point_offsets_of(SolveTakeParams(points="joints", point_offsets=rows)), 0.01)
+    with pytest.raises(NodeError, match="16 rows"):
+        point_offsets_of(SolveTakeParams(points="joints", point_offsets=rows[:3]))
+    with pytest.raises(NodeError, match="within 0.3 m"):
+        point_offsets_of(SolveTakeParams(points="joints", point_offsets=[[0.5, 0.0]] * 16))
+
+
+def _video(tmp_path, n=12):
+    path = tmp_path / "v.avi"
+    w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (64, 48))
+    for i in range(n):
+        img = np.zeros((48, 64, 3), np.uint8)
+        img[:, :, 0] = 20 * i  # blue channel encodes the frame
+        w.write(img)
+    w.release()
+    return probe_video(path)
+
+
+@pytest.mark.parametrize("depth", [0, 1, 4])
+def test_reader_thread_gives_the_frames_in_order_as_rgb(tmp_path, depth):
+    clip = _video(tmp_path)
+    ref = [(i, f[..., ::-1]) for i, f in iter_frames(clip)]
+    got = list(prefetched_rgb_frames(clip, depth))
+    assert [i for i, _ in got] == [i for i, _ in ref]
+    for (_, a), (_, b) in zip(got, ref):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_reader_thread_raises_decoding_errors_and_stops_when_closed(tmp_path):
+    clip = _video(tmp_path)
+    gen = prefetched_rgb_frames(clip, 2)
+    next(gen)
+    gen.close()  # the consumer stops early: the reader must not hang on a full queue
+    assert not [t for t in threading.enumerate() if t.name == "mediapipe-reader"]
+    Path(clip.path).unlink()
+    with pytest.raises(NodeError, match="does not exist"):
+        list(prefetched_rgb_frames(clip, 2))
