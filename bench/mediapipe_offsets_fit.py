@@ -33,6 +33,21 @@ from tbha_graph.mocap.skeleton import JOINT_NAMES  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def truth_sides(points: np.ndarray, truth2d: np.ndarray) -> np.ndarray:
+    """The joints ``(n, 16, 2)`` with each frame's arms and legs labelled as the truth says (nearer labelling):
+    the fit is about where the landmarks sit, not about telling left from right (the node's job, scored by
+    bench/mediapipe_compare.py), so a frame whose labels stayed wrong must not bias it."""
+    out = points.copy()
+    for parts in (("shoulder", "elbow", "wrist"), ("hip", "knee", "ankle")):
+        L = [JOINT_NAMES.index("left_" + p) for p in parts]
+        R = [JOINT_NAMES.index("right_" + p) for p in parts]
+        e_keep = np.linalg.norm(points[:, L + R] - truth2d[:, L + R], axis=-1).sum(1)
+        e_swap = np.linalg.norm(points[:, R + L] - truth2d[:, L + R], axis=-1).sum(1)
+        f = e_swap < e_keep
+        out[np.ix_(f, L + R)] = points[np.ix_(f, R + L)]
+    return out
+
+
 def main() -> None:
     P, K, obs, tr, used = [], [], [], [], []
     for name in FIT:
@@ -40,7 +55,8 @@ def main() -> None:
         gt = np.load(folder / "ground_truth.npz")
         t = run_node(mediapipe_pose, {"offsets": "none"}, video=probe_video(folder / "sample.mp4"))["tracks"]
         n = min(len(t["points"]), len(gt["joints3d_cam"]))
-        P.append(gt["joints3d_cam"][:n]); K.append(gt["K"]); obs.append(t["points"][:n]); tr.append(t["tracked"][:n])
+        pts = truth_sides(np.asarray(t["points"][:n], dtype=np.float64), gt["joints2d"][:n])
+        P.append(gt["joints3d_cam"][:n]); K.append(gt["K"]); obs.append(pts); tr.append(t["tracked"][:n])
         used.append({"render": name, "frames": int(n), "clip": FIT[name][0].name, "settings": FIT[name][1]})
     offsets, stats = fit_point_offsets(P, K, obs, tr)
     for j, name in enumerate(JOINT_NAMES):
@@ -57,7 +73,7 @@ def main() -> None:
         "what": "offsets of MediaPipe Pose's landmarks (mapped onto the 16 joints by detect.mediapipe_pose) from the "
                 "project's joint centres, in the solver's body frame: 'along' the limb axis through the joint, 'out' of "
                 "the body's front, metres (tbha_graph.mocap.reconstruct.take_model.point_positions)",
-        "how": "linear least squares per joint (left and right pooled) of the landmarks' pixels against the renders' true "
+        "how": "MediaPipe's arms and legs labelled left/right per frame as the truth says, then linear least squares per joint (left and right pooled) of the landmarks' pixels against the renders' true "
                "camera-frame joints moved by the offsets, through the true camera; observations beyond 3 median residuals "
                "dropped twice (tbha_graph.mocap.detect.landmark_offsets.fit_point_offsets)",
         "command": "python bench/mediapipe_offsets_fit.py --write",

@@ -7,8 +7,9 @@ in 141 of 210 frames, T-pose included. A swap moves every left landmark to where
 a shoulder's width in the image, while real limbs move continuously.
 
 :func:`consistent_sides` re-decides the labels per *group* of mirror landmark pairs (the arms with the
-shoulders and hands, the legs with the hips and feet, the face) as a two-state Viterbi path over the frames:
-state 0 keeps the detector's labels, state 1 swaps the group. The cost of a path is the image distance each
+shoulders and hands, the legs with the hips and feet, the face) as a Viterbi path over the frames: per group
+state 0 keeps the detector's labels, state 1 swaps them (arms and legs decided together, four states, with
+a cost for a torso whose shoulders and hips face opposite ways). The cost of a path is the image distance each
 landmark moves from the previous frame, so the path that moves the limbs least wins; the first frame's state
 is the one that puts the person's left on the image's right (the take opens facing the camera, as the
 solver needs anyway) — or, with ``start="detector"``, the detector's own labels.
@@ -40,54 +41,98 @@ def mirror_pairs(layout: Layout) -> dict[str, list[tuple[int, int]]]:
     return out
 
 
-def _viterbi_two(step_cost: np.ndarray, first: np.ndarray) -> np.ndarray:
-    """Cheapest state path for two states: ``step_cost (n-1, 2, 2)`` cost of (state at t, state at t+1),
-    ``first (2,)`` cost of the first state. Returns ``(n,)`` int."""
-    n = step_cost.shape[0] + 1
-    acc = first.astype(np.float64).copy()
-    back = np.zeros((n, 2), dtype=np.int64)
-    for t in range(1, n):
+def _viterbi(step_cost: np.ndarray, unary: np.ndarray) -> np.ndarray:
+    """Cheapest state path: ``step_cost (m-1, K, K)`` cost of (state at t, state at t+1), ``unary (m, K)``.
+    Returns ``(m,)`` int."""
+    m, K = unary.shape
+    acc = unary[0].astype(np.float64).copy()
+    back = np.zeros((m, K), dtype=np.int64)
+    for t in range(1, m):
         tot = acc[:, None] + step_cost[t - 1]  # (from, to)
         back[t] = np.argmin(tot, axis=0)
-        acc = tot[back[t], [0, 1]]
-    path = np.empty(n, dtype=np.int64)
+        acc = tot[back[t], np.arange(K)] + unary[t]
+    path = np.empty(m, dtype=np.int64)
     path[-1] = int(np.argmin(acc))
-    for t in range(n - 1, 0, -1):
+    for t in range(m - 1, 0, -1):
         path[t - 1] = back[t, path[t]]
     return path
 
 
+def _group_states(P: np.ndarray, pairs: list[tuple[int, int]]) -> np.ndarray:
+    """``(m, 2, 2k, 2)``: the group's landmarks as labelled (state 0) and swapped (state 1)."""
+    li, ri = np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+    keep = np.concatenate([P[:, li], P[:, ri]], axis=1)
+    flip = np.concatenate([P[:, ri], P[:, li]], axis=1)
+    return np.stack([keep, flip], axis=1)
+
+
+def _motion_cost(S: np.ndarray) -> np.ndarray:
+    """``(m-1, 2, 2)``: how far the group's landmarks move from frame to frame for each pair of states."""
+    d = np.linalg.norm(S[1:, None, :] - S[:-1, :, None], axis=-1)  # (m-1, from, to, 2k)
+    return np.nan_to_num(d, nan=0.0).sum(axis=-1)
+
+
 def consistent_sides(points: np.ndarray, detected: np.ndarray, layout: Layout = MEDIAPIPE_POSE,
-                     start: str = "facing_camera") -> dict[str, np.ndarray]:
+                     start: str = "facing_camera", coupling: float = 2.0) -> dict[str, np.ndarray]:
     """Per group (:func:`mirror_pairs`) a bool ``(n,)``: True where the detector's left/right labels are to be
     swapped. ``points`` ``(n, L, 2)`` image landmarks (any unit), ``detected`` ``(n,)`` bool (frames without a
-    detection are skipped: the path continues across them)."""
+    detection are skipped: the path continues across them).
+
+    The arms (with the shoulders) and the legs (with the hips) are decided together, four states per frame:
+    besides how far each group's landmarks move, a frame whose shoulders and hips face opposite ways (the
+    labelled left shoulder right of the right one while the left hip is left of the right one: a torso
+    turned by half a turn) costs ``coupling`` x the smaller of the two widths in pixels; side-on (one width
+    near 0) costs nothing. The face is decided on its own.
+
+    Measured on the renders (frames with the arms' / legs' labels still wrong, of 99-210): the sample 1 / 0,
+    131_02 far 1 / 1, 131_03 hop 1 / 2, 131_01 low camera 72 / 78 (MediaPipe misses its T-pose and flips
+    its labels every few frames while the actor stands facing it); on the turning renders of the offsets fit
+    0 / 0, 0 / 4 and 80 / 83 (131_03's fast spin: a whole turn in about a second). Without the coupling the
+    legs of the far and the hop takes went wrong for 70-100 frames. A prior for facing the camera fixed
+    half of 131_01's frames but broke the turning takes (60+ frames each), so there is none."""
     pts = np.asarray(points, dtype=np.float64)
     idx = np.flatnonzero(np.asarray(detected, dtype=bool))
     n = pts.shape[0]
-    out: dict[str, np.ndarray] = {}
-    for group, pairs in mirror_pairs(layout).items():
-        swap = np.zeros(n, dtype=bool)
-        if len(idx) == 0 or not pairs:
-            out[group] = swap
-            continue
-        li, ri = np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
-        P = pts[idx]
-        keep = np.concatenate([P[:, li], P[:, ri]], axis=1)  # (m, 2k, 2) as labelled
-        flip = np.concatenate([P[:, ri], P[:, li]], axis=1)  # swapped
-        S = np.stack([keep, flip], axis=1)  # (m, 2 states, 2k, 2)
-        d = np.linalg.norm(S[1:, None, :] - S[:-1, :, None], axis=-1)  # (m-1, from, to, 2k)
-        step = np.nan_to_num(d, nan=0.0).sum(axis=-1)
+    out = {g: np.zeros(n, dtype=bool) for g in GROUPS}
+    pairs = mirror_pairs(layout)
+    if len(idx) == 0:
+        return out
+    P = pts[idx]
+    m = len(idx)
+
+    def first_cost(S: np.ndarray) -> np.ndarray:
+        """(2,) cost of each state on the first frame: the person's left on the image's right (facing the camera)."""
+        k = S.shape[2] // 2
+        dx = np.nanmean(S[0, :, :k, 0] - S[0, :, k:, 0], axis=-1)  # (2,) left x - right x per state
         if start == "facing_camera":
-            # facing the camera, the person's left is on the image's right: left x - right x > 0
-            dx = float(np.nanmean(P[0, li, 0] - P[0, ri, 0]))
-            first = np.array([0.0, 1e6]) if dx >= 0 else np.array([1e6, 0.0])
-        else:
-            first = np.array([0.0, 1e6])
-        path = _viterbi_two(step, first) if len(idx) > 1 else np.argmin(first)[None]
-        swap[idx] = path.astype(bool)
-        # frames without a detection follow the previous detected frame
-        out[group] = swap
+            return np.where(dx >= 0, 0.0, 1e6)
+        return np.array([0.0, 1e6])
+
+    # arms x legs: state = 2 * arms_swapped + legs_swapped
+    Sa, Sl = _group_states(P, pairs["arms"]), _group_states(P, pairs["legs"])
+    ma, ml = _motion_cost(Sa), _motion_cost(Sl)
+    step = ma[:, :, None, :, None] + ml[:, None, :, None, :]  # (m-1, a_from, l_from, a_to, l_to)
+    step = step.reshape(m - 1, 4, 4)
+    sh = [layout.index("left_shoulder"), layout.index("right_shoulder")]
+    hp = [layout.index("left_hip"), layout.index("right_hip")]
+    sdx = P[:, sh[0], 0] - P[:, sh[1], 0]
+    hdx = P[:, hp[0], 0] - P[:, hp[1], 0]
+    unary = np.zeros((m, 4))
+    for a in (0, 1):
+        for leg in (0, 1):
+            s_ = sdx * (1 - 2 * a)
+            h_ = hdx * (1 - 2 * leg)
+            unary[:, 2 * a + leg] = np.where(s_ * h_ < 0, coupling * np.minimum(np.abs(s_), np.abs(h_)), 0.0)
+    fa, fl = first_cost(Sa), first_cost(Sl)
+    unary[0] += (fa[:, None] + fl[None, :]).reshape(4)
+    path = _viterbi(step, np.nan_to_num(unary))
+    out["arms"][idx] = path >= 2
+    out["legs"][idx] = (path % 2).astype(bool)
+    if pairs["face"]:
+        Sf = _group_states(P, pairs["face"])
+        uf = np.zeros((m, 2))
+        uf[0] = first_cost(Sf)
+        out["face"][idx] = _viterbi(_motion_cost(Sf), uf).astype(bool)
     return out
 
 
