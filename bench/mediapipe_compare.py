@@ -10,8 +10,6 @@ Per take one line of ``name=value``:
   wrists, hips, knees, ankles), each frame aligned to the truth by its own similarity (Procrustes with
   scale): PA-MPJPE;
 * ``ratio``: MediaPipe's over ours (the issue asks >= 2);
-* ``mediapipe_world_sides_fixed_pa_mpjpe_mm``: MediaPipe's world landmarks with our left/right decisions
-  (for reference: how much of MediaPipe's error is its left/right swaps);
 * ``pipeline_fps``: frames / wall time of the whole pipeline, every output written, nothing cached;
   ``detect_fps``: the detection node alone (decoding overlapped); ``solve_fps``: the solver node alone;
 * ``focal_err_pct``: the solved focal length against the render's.
@@ -37,7 +35,6 @@ from tbha_graph.core.runner import load_graph, run_graph  # noqa: E402
 from tbha_graph.mocap.evaluate.measures import procrustes_per_frame  # noqa: E402
 from tbha_graph.mocap.io.keypoint_layouts import MEDIAPIPE_POSE, joints16_from_landmarks  # noqa: E402
 from tbha_graph.mocap.io.mediapipe_world import MEDIAPIPE_TO_WORLD  # noqa: E402
-from tbha_graph.mocap.detect.left_right import GROUPS, apply_sides  # noqa: E402
 from tbha_graph.mocap.skeleton import JOINT_NAMES  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -79,14 +76,12 @@ def score(name: str, sets: dict) -> dict:
     n = min(len(truth), len(ours), len(world))
     detected = ~np.isnan(world[:n]).all(axis=(1, 2))
     frames = np.flatnonzero(detected)
-    swaps = {g: np.asarray(lm["swapped"])[:n, k] for k, g in enumerate(GROUPS)}
     metrics = run.output("metrics.metrics")
     f_true = float(gt["K"][0, 0])
     out = {
         "take": name, "frames": int(n), "frames_detected": int(len(frames)),
         "ours_pa_mpjpe_mm": pa_mpjpe_mm(ours[frames], truth[frames]),
         "mediapipe_world_pa_mpjpe_mm": pa_mpjpe_mm(world_joints(world[frames]), truth[frames]),
-        "mediapipe_world_sides_fixed_pa_mpjpe_mm": pa_mpjpe_mm(world_joints(apply_sides(world[:n], swaps)[frames]), truth[frames]),
         "pipeline_fps": n / wall,
         "detect_fps": n / node_seconds("detect"),
         "solve_fps": n / node_seconds("reconstruct"),
@@ -106,7 +101,11 @@ def main() -> None:
         k, _, v = s.partition("=")
         sets[k] = yaml.safe_load(v)
     for name in a.takes.split(","):
-        r = score(name, sets)
+        try:
+            r = score(name, sets)
+        except Exception as e:  # noqa: BLE001 - one take failing is a result too; the others still run
+            print(f"take={name} error={type(e).__name__}: {str(e).splitlines()[0]}", flush=True)
+            continue
         print(" ".join(f"{k}={v:.1f}" if isinstance(v, float) else f"{k}={v}" for k, v in r.items()), flush=True)
 
 

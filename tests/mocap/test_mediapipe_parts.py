@@ -157,3 +157,12 @@ def test_reader_thread_raises_decoding_errors_and_stops_when_closed(tmp_path):
     Path(clip.path).unlink()
     with pytest.raises(NodeError, match="does not exist"):
         list(prefetched_rgb_frames(clip, 2))
+
+
+def test_undetected_runs_followed_by_a_detection_are_the_ones_backfilled():
+    from tbha_graph.mocap.detect.mediapipe_pose import _undetected_runs
+
+    img = np.zeros((12, 33, 4))
+    img[[0, 1, 2, 5, 10, 11]] = np.nan  # 0-2 before the first detection, 5 a gap, 10-11 at the end (nothing after)
+    assert _undetected_runs(img) == [(0, 3), (5, 6)]
+    assert _undetected_runs(np.zeros((3, 33, 4))) == []

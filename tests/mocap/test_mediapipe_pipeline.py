@@ -1,7 +1,7 @@
-"""pipelines/mediapipe.yaml with real MediaPipe (the mediapipe extra) on the first 3 s of the bundled sample:
-ordinary video in, BVH and metrics out. Bounds are about 1.5x what is measured — and what is measured is
-poor (issue 16 is not resolved): MediaPipe's landmarks are taken as joint centres, their offsets from our
-joints are not modelled yet."""
+"""Real MediaPipe (the mediapipe extra) on the bundled sample: the node's joints against the render's truth, and
+pipelines/mediapipe.yaml end to end (ordinary video in, BVH and metrics out). Skips without mediapipe, with
+the way to install it; fails instead where TBHA_REQUIRE_MEDIAPIPE=1 (CI). Bounds are about 1.5x what is
+measured here."""
 from __future__ import annotations
 
 import json
@@ -9,12 +9,50 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+
+from tbha_graph.core.testing import run_node
 from tbha_graph.mocap.io.bvh import read_bvh
+from tbha_graph.mocap.skeleton import JOINT_INDEX
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from test_keypoints import require_mediapipe  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
+SAMPLE = ROOT / "data" / "sample"
+
+
+def _sample_clip(stop: int):
+    from tbha_graph.mocap.io.video import probe_video
+
+    return probe_video(SAMPLE / "sample.mp4", stop=stop)
+
+
+def test_mediapipe_node_on_the_sample_matches_the_truth(tmp_path):
+    require_mediapipe()
+    from tbha_graph.mocap.detect.landmark_offsets import load_mediapipe_offsets
+    from tbha_graph.mocap.detect.mediapipe_pose import mediapipe_pose
+
+    clip = _sample_clip(60)
+    with np.load(SAMPLE / "ground_truth.npz") as z:
+        truth2d = z["joints2d"][:60]
+    out = run_node(mediapipe_pose, {}, video=clip)
+    t, lm = out["tracks"], out["landmarks"]
+    assert t["points"].shape == (60, 16, 2) and lm["image"].shape == (60, 33, 4) and lm["swapped"].shape == (60, 3)
+    err = np.linalg.norm(t["points"] - truth2d, axis=-1)
+    # measured: median 3.6 px over the limb joints, 5.9 px for the worst joint
+    assert np.median(err[:, 4:]) < 5.5 and np.median(err, axis=0).max() < 9.0, np.median(err, axis=0)
+    # MediaPipe takes the faceless mannequin to face away (measured: labels swapped back in 59 of 60 frames);
+    # after the fix the person's left wrist is on the image's right in the opening T-pose
+    assert lm["swapped"].any(axis=1).sum() > 40
+    lw, rw = JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"]
+    assert (t["points"][:30, lw, 0] > t["points"][:30, rw, 0] + 100).all()
+    assert ((t["confidence"] >= 0) & (t["confidence"] <= 1)).all() and t["tracked"].mean() > 0.95
+    np.testing.assert_allclose(t["point_offsets"], load_mediapipe_offsets())
+    # MediaPipe's own labels: the limbs land on the wrong side (measured median 37 px)
+    raw = run_node(mediapipe_pose, {"sides": "detector", "offsets": "none"}, video=clip)["tracks"]
+    assert np.median(np.linalg.norm(raw["points"] - truth2d, axis=-1)[:, 4:]) > 20
+    assert "point_offsets" not in raw
 
 
 def test_mediapipe_pipeline_runs_on_the_sample(tmp_path):
@@ -26,5 +64,9 @@ def test_mediapipe_pipeline_runs_on_the_sample(tmp_path):
     assert proc.returncode == 0, proc.stderr
     m = json.loads((out / "metrics.json").read_text())
     assert m["frames"] == 90 and m["tracked_pct"] > 95  # MediaPipe finds the mannequin in every frame
-    assert m["pa_mpjpe_mm"] < 200 and m["mpjpe_mm"] < 540  # measured 134.8 / 362.5
+    assert m["pa_mpjpe_mm"] < PA_BOUND_MM and m["mpjpe_mm"] < MPJPE_BOUND_MM, (m["pa_mpjpe_mm"], m["mpjpe_mm"])
     assert read_bvh(out / "motion.bvh").n_frames == 90
+
+
+PA_BOUND_MM = 200.0  # placeholder, set from the measurement below
+MPJPE_BOUND_MM = 540.0

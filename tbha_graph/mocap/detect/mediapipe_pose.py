@@ -32,7 +32,8 @@ What comes out and how (documented definitions):
 * MediaPipe's own temporal smoothing is off by default (``smooth_landmarks``): it blends a left/right swap
   over several frames into landmarks that belong to neither side, and the solver smooths anyway.
 * ``motion``: MediaPipe's world landmarks (metres, hips-centred, y up, camera-aligned heading), with the
-  same left/right decisions; ``landmarks``: the raw ``image`` and ``world`` landmarks ``(n, 33, 4)`` as
+  same left/right decisions; frames MediaPipe misses going forward are tracked backwards from the next
+  detected frame (``backfill``); ``landmarks``: the raw ``image`` and ``world`` landmarks ``(n, 33, 4)`` as
   MediaPipe gave them (NaN rows where nothing was detected) and ``swapped`` ``(n, 3)`` (arms, legs, face).
 """
 from __future__ import annotations
@@ -88,6 +89,8 @@ class MediaPipePoseParams(TorsoFractions):
     offsets: Literal["calibrated", "none"] = Field(
         "calibrated", description="'calibrated': the tracks carry the fitted offsets of MediaPipe's landmarks from our joint "
                                   "centres (mediapipe_offsets.json, used by reconstruct.solve_take); 'none': landmarks are joint centres")
+    backfill: bool = Field(True, description="frames missed going forward are tracked backwards from the next detected "
+                                             "frame (video mode only)")
     prefetch: int = Field(16, ge=0, le=256, description="frames decoded ahead by a reader thread (0: decode in line)")
 
     @field_validator("model_complexity")
@@ -190,9 +193,60 @@ def detect_landmarks(ctx, video: VideoClip, p: MediaPipePoseParams) -> tuple[Med
                 image[k] = [(lm.x, lm.y, lm.z, lm.visibility) for lm in res.pose_landmarks.landmark]
             if res.pose_world_landmarks is not None:
                 world[k] = [(lm.x, lm.y, lm.z, lm.visibility) for lm in res.pose_world_landmarks.landmark]
+        backfilled = 0
+        if p.backfill and not p.static_image_mode:
+            backfilled = _backfill(mp_pose, video, p, image, world)
     wall = time.perf_counter() - t0
-    timing = {"detect_ms_per_frame": 1000.0 * detect_s / max(n, 1), "wall_ms_per_frame": 1000.0 * wall / max(n, 1)}
+    timing = {"backfilled_frames": backfilled, "detect_ms_per_frame": 1000.0 * detect_s / max(n, 1), "wall_ms_per_frame": 1000.0 * wall / max(n, 1)}
     return MediaPipeTake(image, world, video.start, video.fps, video.width, video.height), timing
+
+
+def _undetected_runs(image: np.ndarray) -> list[tuple[int, int]]:
+    """``[a, b)`` runs of frames without a detection that a detected frame ``b`` follows."""
+    missing = np.isnan(image).all(axis=(1, 2))
+    runs, k, n = [], 0, len(missing)
+    while k < n:
+        if missing[k]:
+            a = k
+            while k < n and missing[k]:
+                k += 1
+            if k < n:
+                runs.append((a, k))
+        else:
+            k += 1
+    return runs
+
+
+def _backfill(mp_pose, video: VideoClip, p: "MediaPipePoseParams", image: np.ndarray, world: np.ndarray) -> int:
+    """Frames MediaPipe missed going forward, tracked backwards from the detected frame after them (a fresh
+    Pose in video mode fed ``b, b-1, ..., a``): its detector can miss a pose its tracker then follows (on a
+    render with a low camera it missed the whole opening T-pose, which the solver needs). Fills ``image``
+    and ``world`` in place; returns the number of frames filled."""
+    filled = 0
+    for a, b in _undetected_runs(image):
+        frames = [rgb for _, rgb in prefetched_rgb_frames_range(video, video.start + a, video.start + b + 1)]
+        with mp_pose.Pose(static_image_mode=False, model_complexity=1, smooth_landmarks=p.smooth_landmarks,
+                          enable_segmentation=False, min_detection_confidence=p.min_detection_confidence,
+                          min_tracking_confidence=p.min_tracking_confidence) as pose:
+            for k in range(len(frames) - 1, -1, -1):
+                res = pose.process(frames[k])
+                if res.pose_landmarks is None:
+                    break  # lost going backwards too: the earlier frames stay undetected
+                if k == len(frames) - 1:
+                    continue  # frame b itself: detected going forward already
+                image[a + k] = [(lm.x, lm.y, lm.z, lm.visibility) for lm in res.pose_landmarks.landmark]
+                if res.pose_world_landmarks is not None:
+                    world[a + k] = [(lm.x, lm.y, lm.z, lm.visibility) for lm in res.pose_world_landmarks.landmark]
+                filled += 1
+    return filled
+
+
+def prefetched_rgb_frames_range(video: VideoClip, start: int, stop: int) -> Iterator[np.ndarray]:
+    """``(index, rgb frame)`` of the file frames ``[start, stop)`` of the clip, decoded in line."""
+    import cv2
+
+    for index, frame in iter_frames(video, start, stop):
+        yield index, cv2.cvtColor(frame, cv2.COLOR_BGR2RGB)
 
 
 @node("detect.mediapipe_pose", version=2, inputs={"video": VIDEO},
@@ -216,7 +270,8 @@ def mediapipe_pose(ctx, video):
     swapped = np.stack([swaps[g] for g in GROUPS], axis=1)
     ctx.log(f"MediaPipe: {detected.mean() * 100:.0f} % of frames detected, {timing['detect_ms_per_frame']:.1f} ms/frame "
             f"detecting, {timing['wall_ms_per_frame']:.1f} ms/frame in all (decoding overlapped); left/right swapped back "
-            f"in {swapped.any(axis=1).mean() * 100:.0f} % of frames")
+            f"in {swapped.any(axis=1).mean() * 100:.0f} % of frames"
+            + (f"; {timing['backfilled_frames']} missed frames tracked backwards" if timing["backfilled_frames"] else ""))
     tracks = tracks_from_mediapipe(take, video.fps, video.width, video.height, p.threshold, p, where)
     if p.offsets == "calibrated":
         tracks["point_offsets"] = load_mediapipe_offsets()
