@@ -13,10 +13,8 @@ from __future__ import annotations
 
 import datetime
 import json
-import os
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +22,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from mediapipe_renders import FIT, render  # noqa: E402
 
+from tbha_graph.core.atomic import atomic_write_text  # noqa: E402
 from tbha_graph.core.testing import run_node  # noqa: E402
 from tbha_graph.mocap.detect.landmark_offsets import OFFSETS_FILE, fit_point_offsets  # noqa: E402
 from tbha_graph.mocap.detect.mediapipe_pose import mediapipe_pose  # noqa: E402
@@ -84,11 +83,7 @@ def main() -> None:
         "residual_px_median_per_axis": {n: {"before": stats[n]["px_median_before"], "after": stats[n]["px_median_after"],
                                             "observations": stats[n]["observations"]} for n in JOINT_NAMES},
     }
-    fd, tmp = tempfile.mkstemp(dir=OFFSETS_FILE.parent, prefix=".mediapipe_offsets.", suffix=".tmp")
-    with os.fdopen(fd, "w", encoding="utf-8") as f:
-        json.dump(doc, f, indent=1)
-        f.write("\n")
-    os.replace(tmp, OFFSETS_FILE)
+    atomic_write_text(OFFSETS_FILE, json.dumps(doc, indent=1) + "\n")
     print(f"written: {OFFSETS_FILE}")
 
 
