@@ -332,14 +332,14 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
     if p.focal_px is not None:
         starts, focal_prior = [float(p.focal_px)], (float(p.focal_px), 1e-4)
         report["focal_source"] = "given"
-        q = p
+        q, estimated = p, False
     else:
         # weak prior: lenses of ordinary cameras have f ~ 0.8-1.9 x the image width (log-normal around 1.2 W)
         starts, focal_prior = [m * width for m in p.focal_grid], (p.focal_prior_width * width, p.focal_prior_log_sd)
         report["focal_source"] = "estimated from the take"
         # the focal length is chosen under the weaker priors (the torso's acceleration prior is metric, so it
         # scales with the focal length and pulls the choice); the pose is then solved at it with p's priors
-        q = p.model_copy(update={"sigma_twist": p.select_sigma_twist, "sigma_acc_torso": None})
+        q, estimated = p.model_copy(update={"sigma_twist": p.select_sigma_twist, "sigma_acc_torso": None}), True
     contact = contacts_from_image(points, tracked, fps)
     report["planted_pct"] = [round(float(c) * 100, 1) for c in contact.mean(axis=0)]
     best, sweep, kept1 = None, [], 0
@@ -395,7 +395,7 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
         focal_sd_pct = float(np.sqrt(max(cov[0, 0], 0.0)) * 100.0)
     except Exception:  # noqa: BLE001 - a singular system: the focal length is not determined
         focal_sd_pct = float("inf")
-    if q is not p or p.side_search:  # the pose at the chosen focal length under p's priors: LM, the depth-side
+    if estimated or p.side_search:  # the pose at the chosen focal length under p's priors: LM, the depth-side
         f_sel, nf_s, d_s, _, P_s = prob.solution(x)  # search on the whole take, LM (focal held)
         g_s = np.concatenate([[np.log(f_sel), 0.0, 0.0, d_s], prob.globals_of(x)[4:]])
         prob, x, cost, ne, _ = solve_frames(points, weight, lengths, centre, fps, P_s, (nf_s, d_s), g_s, p,

@@ -21,6 +21,7 @@ above the floor, no ankle goes below it) and a weak prior of the point offsets a
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -308,6 +309,7 @@ class TakeProblem:
                 both &= ~np.asarray(self.d.breaks, dtype=bool)[:, None]
         return step, both
 
+    @cached_property
     def acc_scale(self) -> np.ndarray:
         """``(48,)`` factor turning each joint coordinate's second difference (m per frame²) into sigma units."""
         sig = np.full(N_JOINTS, self.w.sigma_acc)
@@ -316,7 +318,7 @@ class TakeProblem:
         return np.repeat(self.d.fps ** 2 / sig, 3)
 
     def coupled_terms(self, P: np.ndarray, nf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        acc = (P[2:] - 2.0 * P[1:-1] + P[:-2]).reshape(max(self.n - 2, 0), -1) * self.acc_scale()
+        acc = (P[2:] - 2.0 * P[1:-1] + P[:-2]).reshape(max(self.n - 2, 0), -1) * self.acc_scale
         acc = acc * self.d.acc_mask()[:, None]
         step, both = self.slide_vectors(P, nf)
         slide = np.where(both, np.linalg.norm(step, axis=-1), 0.0) / self.w.sigma_slide
@@ -463,7 +465,7 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray, h: float = 1e-6) -> tup
     up2 = np.zeros((n, m, m))
     acc, slide = prob.coupled_terms(P0, nf)
     if n > 2:
-        s = prob.acc_scale()
+        s = prob.acc_scale
         dPs = dP * s[None, :, None]
         c = (1.0, -2.0, 1.0)
         mask = prob.d.acc_mask()[:, None, None]
@@ -508,7 +510,7 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray, h: float = 1e-6) -> tup
         C = np.einsum("tri,trg->tig", dR, Jf)
         if n > 2:  # accelerations depend on globals too when bone lengths are free
             Ja = Jg[n * F: n * F + (n - 2) * N_JOINTS * 3].reshape(n - 2, N_JOINTS * 3, G)
-            s_acc = prob.acc_scale()[None, :, None]
+            s_acc = prob.acc_scale[None, :, None]
             am = prob.d.acc_mask()[:, None, None]
             for k, ck in enumerate((1.0, -2.0, 1.0)):
                 C[k:n - 2 + k] += ck * np.einsum("tmi,tmg->tig", dP[k:n - 2 + k] * s_acc, Ja * am)
