@@ -1,12 +1,13 @@
 """The Dask executor (extra ``dask``): independent nodes run in parallel on a Dask cluster.
 
-Each node is one Dask task running :func:`execute_node`, depending on its upstream tasks. Values travel
+Each node is one Dask task running :func:`execute_node`, submitted by the driver once its upstream nodes are
+done (with their light results as arguments, not futures, so Dask spreads independent tasks). Values travel
 through the shared cache, not through Dask: a task returns only fingerprints and the entry path, so a
 worker process loads what it needs from the cache folder (which must be visible to every worker —
 true for a LocalCluster; for a remote cluster, point ``TBHA_CACHE_DIR`` at a shared file system).
 
 A task whose upstream value fails its checksum while loading returns a marker naming the corrupt node
-(and the tasks after it pass the marker on without running); the driver then removes that entry and
+(the driver submits nothing after it); the driver then removes that entry and
 submits the graph again: what is intact is a cache hit, the corrupt node and what depends on it run
 again. Each task's private work folder is removed when the task ends (its files are in the cache).
 """
@@ -26,9 +27,6 @@ CORRUPT = "corrupt-upstream"
 
 
 def _task(node_id: str, graph: Graph, cache_root: str, *upstream: NodeResult) -> NodeResult:
-    for r in upstream:  # an upstream task found a corrupt entry: pass the marker on, run nothing
-        if r.status == CORRUPT:
-            return r
     cache = Cache(cache_root)
     inputs = {r.node_id: r for r in upstream}
     work = Path(tempfile.mkdtemp(prefix=f"tbha-dask-{node_id}-"))
@@ -58,19 +56,57 @@ def client_for(scheduler: str | None = None, workers: int | None = None):
     return Client(cluster), cluster
 
 
-def _submit_all(client, graph: Graph, order: list[str], cache: Cache, attempt: int) -> dict:
-    futures = {}
-    for nid in order:
-        ups = sorted({src for src, _ in graph.nodes[nid].inputs.values()})
-        futures[nid] = client.submit(_task, nid, graph, str(cache.root), *[futures[u] for u in ups],
-                                     key=f"tbha-{nid}-{id(graph)}-{attempt}", pure=False)
-    return futures
+def _run_attempt(client, graph: Graph, order: list[str], cache: Cache, reporter: Reporter, attempt: int):
+    """Submit each node once its upstream nodes are done; return (results, corrupt markers).
+
+    The driver dispatches: a task receives its upstream results as plain (light) values, never as Dask
+    futures, so Dask sees independent tasks and spreads them over idle workers instead of pulling them
+    onto the worker that holds an upstream result (values travel through the cache, not through Dask).
+    A node whose upstream is corrupt is not submitted.
+    """
+    from distributed import as_completed
+
+    ups = {nid: sorted({src for src, _ in graph.nodes[nid].inputs.values()}) for nid in order}
+    results: dict[str, NodeResult] = {}
+    corrupt: dict[str, NodeResult] = {}
+    submitted: set[str] = set()
+    by_key: dict[str, str] = {}
+    pending = as_completed(loop=client.loop)
+    futures = []
+
+    def submit_ready():
+        for nid in order:
+            if nid not in submitted and all(u in results for u in ups[nid]):
+                fut = client.submit(_task, nid, graph, str(cache.root), *[results[u] for u in ups[nid]],
+                                    key=f"tbha-{nid}-{id(graph)}-{attempt}", pure=False)
+                submitted.add(nid)
+                by_key[fut.key] = nid
+                futures.append(fut)
+                pending.add(fut)
+
+    submit_ready()
+    for fut in pending:
+        nid = by_key[fut.key]
+        try:
+            res = fut.result()
+        except TbhaError:
+            client.cancel(futures)
+            raise
+        if res.status == CORRUPT:
+            corrupt.setdefault(res.node_id, res)
+            continue
+        for w in res.warnings:
+            reporter.warn(w)
+        for w in res.node_warnings:
+            reporter.warn(f"{nid}: {w}")
+        reporter.node_done(nid, graph.nodes[nid].spec.type, res.status, res.seconds)
+        results[nid] = res
+        submit_ready()
+    return results, corrupt
 
 
 def run_dask(graph: Graph, node_ids: list[str], cache: Cache, reporter: Reporter, scheduler: str | None = None, workers: int | None = None, client=None) -> dict[str, NodeResult]:
     """Run the needed nodes as Dask tasks through ``cache``; results equal the local executor's."""
-    from distributed import as_completed
-
     own = client is None
     cluster = None
     if own:
@@ -78,27 +114,7 @@ def run_dask(graph: Graph, node_ids: list[str], cache: Cache, reporter: Reporter
     try:
         order = graph.needed_for(node_ids)
         for attempt in range(len(order) + 2):
-            futures = _submit_all(client, graph, order, cache, attempt)
-            results: dict[str, NodeResult] = {}
-            corrupt: dict[str, NodeResult] = {}
-            by_key = {f.key: nid for nid, f in futures.items()}
-            for fut in as_completed(list(futures.values())):
-                nid = by_key[fut.key]
-                try:
-                    res = fut.result()
-                except TbhaError:
-                    for f in futures.values():
-                        f.cancel()
-                    raise
-                if res.status == CORRUPT:
-                    corrupt.setdefault(res.node_id, res)
-                    continue
-                for w in res.warnings:
-                    reporter.warn(w)
-                for w in res.node_warnings:
-                    reporter.warn(f"{nid}: {w}")
-                reporter.node_done(nid, graph.nodes[nid].spec.type, res.status, res.seconds)
-                results[nid] = res
+            results, corrupt = _run_attempt(client, graph, order, cache, reporter, attempt)
             if not corrupt:
                 return {nid: results[nid] for nid in order}
             for bad, marker in corrupt.items():  # remove the corrupt entries, then run again (the rest are hits)
