@@ -21,7 +21,7 @@ above the floor, no ankle goes below it) and a weak prior of the point offsets a
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, lru_cache
 
 import numpy as np
 
@@ -93,7 +93,7 @@ ANKLES = np.array([J["left_ankle"], J["right_ankle"]])
 
 def unit(v: np.ndarray) -> np.ndarray:
     """Unit vectors along the last axis (zero vectors stay near zero)."""
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-9)
+    return v / np.maximum(np.sqrt(np.einsum("...i,...i->...", v, v)), 1e-9)[..., None]
 
 
 def tangent_basis(ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -105,22 +105,24 @@ def tangent_basis(ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def fronts(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The thorax's and the pelvis's forward directions ``(n, 3)`` from joints ``(n, 16, 3)``
+    """The thorax's and the pelvis's forward directions ``(..., n, 3)`` from joints ``(..., n, 16, 3)``
     (left × up, so +z of a body facing +z)."""
-    thorax = unit(np.cross(P[:, J["left_shoulder"]] - P[:, J["right_shoulder"]], P[:, J["neck"]] - P[:, J["chest"]]))
-    pelvis = unit(np.cross(P[:, J["left_hip"]] - P[:, J["right_hip"]], P[:, J["chest"]] - P[:, J["hips"]]))
+    def at(name):
+        return P[..., J[name], :]
+    thorax = unit(np.cross(at("left_shoulder") - at("right_shoulder"), at("neck") - at("chest")))
+    pelvis = unit(np.cross(at("left_hip") - at("right_hip"), at("chest") - at("hips")))
     return thorax, pelvis
 
 
 def point_positions(P: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """Tracked points ``(n, 16, 3)``: each joint of ``P`` ``(n, 16, 3)`` moved by its ``offsets`` ``(16, 2)``
+    """Tracked points ``(..., n, 16, 3)``: each joint of ``P`` ``(..., n, 16, 3)`` moved by its ``offsets`` ``(16, 2)``
     (metres along the limb axis through it (:data:`AXIS_TRIPLES`), and out of the body's front made perpendicular to that bone)."""
     thorax, pelvis = fronts(P)
-    front = np.where(PELVIS_SIDE[None, :, None], pelvis[:, None, :], thorax[:, None, :])
-    a, m, b = (P[:, AXIS_TRIPLES[:, i]] for i in range(3))
+    front = np.where(PELVIS_SIDE[:, None], pelvis[..., None, :], thorax[..., None, :])
+    a, m, b = (P[..., AXIS_TRIPLES[:, i], :] for i in range(3))
     axis = unit(unit(m - a) + unit(b - m))
     out = unit(front - np.sum(front * axis, axis=-1, keepdims=True) * axis)
-    return P + offsets[None, :, 0:1] * axis + offsets[None, :, 1:2] * out
+    return P + offsets[:, 0:1] * axis + offsets[:, 1:2] * out
 
 
 @dataclass
@@ -254,15 +256,15 @@ class TakeProblem:
         return x[self.n_glob:].reshape(self.n, PER_FRAME)
 
     def joints_from_frames(self, fr: np.ndarray, L: np.ndarray | None = None) -> np.ndarray:
-        """Joint positions ``(n, 16, 3)`` camera frame from frame unknowns ``(n, PER_FRAME)`` and bone lengths
-        ``L`` (the body's when not given)."""
-        tangent = fr[:, 3:].reshape(-1, N_BONES, 2)
+        """Joint positions ``(..., n, 16, 3)`` camera frame from frame unknowns ``(..., n, PER_FRAME)`` (leading
+        axes: e.g. perturbed copies of the take) and bone lengths ``L`` (the body's when not given)."""
+        tangent = fr[..., 3:].reshape(fr.shape[:-1] + (N_BONES, 2))
         dirs = unit(self.ref + tangent[..., 0:1] * self.e1 + tangent[..., 1:2] * self.e2)
-        P = np.empty((fr.shape[0], N_JOINTS, 3))
-        P[:, 0] = fr[:, :3]
+        P = np.empty(fr.shape[:-1] + (N_JOINTS, 3))
+        P[..., 0, :] = fr[..., :3]
         L = self.d.lengths if L is None else L
         for j in ORDER:
-            P[:, j] = P[:, PARENTS[j]] + L[j] * dirs[:, j - 1]
+            P[..., j, :] = P[..., PARENTS[j], :] + L[j] * dirs[..., j - 1, :]
         return P
 
     def solution(self, x: np.ndarray):
@@ -273,28 +275,30 @@ class TakeProblem:
 
     # --- residuals ---------------------------------------------------------------------------
     def frame_terms(self, P: np.ndarray, g: np.ndarray) -> np.ndarray:
-        """Per-frame residuals ``(n, N_FRAME_RES)`` of joints ``P`` ``(n, 16, 3)`` under globals ``g``."""
+        """Per-frame residuals ``(..., n, N_FRAME_RES)`` of joints ``P`` ``(..., n, 16, 3)`` under globals ``g``
+        (leading axes, e.g. perturbed copies of the take, broadcast against the take's data)."""
         w, d = self.w, self.d
         f = np.exp(g[0])
         nf, dfl = self.floor(g)
         Q = point_positions(P, self.offsets(g))
         z = np.maximum(Q[..., 2:3], 1e-3)
         uv = f * Q[..., :2] / z + d.centre
-        rep = robust((uv - d.points) * (d.weight[..., None] / w.sigma_px), w.robust_scale).reshape(P.shape[0], -1)
-        dist = np.linalg.norm(P[:, TORSO_PAIRS[:, 0]] - P[:, TORSO_PAIRS[:, 1]], axis=-1)
-        torso = (dist - d.rest_pairs[None]) / w.sigma_torso
+        rep = robust((uv - d.points) * (d.weight[..., None] / w.sigma_px), w.robust_scale).reshape(P.shape[:-2] + (-1,))
+        dist = np.linalg.norm(P[..., TORSO_PAIRS[:, 0], :] - P[..., TORSO_PAIRS[:, 1], :], axis=-1)
+        torso = (dist - d.rest_pairs) / w.sigma_torso
         thorax, pelvis = fronts(P)
         hin = []
         for jt, a, b, sign in HINGES:
-            inside = unit(P[:, a] - P[:, jt]) + unit(P[:, b] - P[:, jt])
+            inside = unit(P[..., a, :] - P[..., jt, :]) + unit(P[..., b, :] - P[..., jt, :])
             fwd = pelvis if sign < 0 else thorax
             hin.append(np.minimum(sign * np.sum(inside * fwd, axis=-1), 0.0) / w.sigma_hinge)
-        h = P[:, ANKLES] @ nf + dfl - d.ankle_height  # (n, 2) metres above where they rest
+        h = P[..., ANKLES, :] @ nf + dfl - d.ankle_height  # (..., n, 2) metres above where they rest
         below = np.minimum(h, 0.0) / w.sigma_floor
         on = np.where(d.contact, np.maximum(h - w.contact_band, 0.0), 0.0) / w.sigma_floor
-        head = (unit(P[:, J["head"]] - P[:, J["neck"]]) - unit(P[:, J["neck"]] - P[:, J["chest"]])) / w.sigma_pose
+        neck = P[..., J["neck"], :]
+        head = (unit(P[..., J["head"], :] - neck) - unit(neck - P[..., J["chest"], :])) / w.sigma_pose
         twist = (pelvis - thorax) / w.sigma_twist
-        return np.concatenate([rep, torso, np.stack(hin, axis=1), below, on, head, twist], axis=1)
+        return np.concatenate([rep, torso, np.stack(hin, axis=-1), below, on, head, twist], axis=-1)
 
     def slide_vectors(self, P: np.ndarray, nf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Horizontal steps ``(n, 2, 3)`` of the ankles since the previous frame (0 on frame 0) and the mask
@@ -369,6 +373,27 @@ class TakeProblem:
         return out
 
 
+@lru_cache(maxsize=64)
+def _band_pattern(n: int, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where the frame blocks go in LAPACK's upper band storage of the symmetric frame matrix (``n`` blocks of
+    ``m`` unknowns; blocks (t, t), (t, t+1), (t, t+2); ``ku = 3 m - 1`` superdiagonals): ``(rows, cols, src)``
+    with ``ab[rows, cols] = values[src]``, ``values`` = the raveled ``[diag blocks (n), up1 blocks (n - 1),
+    up2 blocks (n - 2)]`` (the diagonal blocks' lower triangles are not stored). Computed once per shape."""
+    ku = 3 * m - 1
+    ii, jj = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
+    rows, cols, src = [], [], []
+    base = 0
+    for off in (0, 1, 2):
+        k = max(n - off, 0)
+        t = np.arange(k)[:, None, None]
+        i = np.broadcast_to(t * m + ii, (k, m, m)).ravel()
+        j = np.broadcast_to((t + off) * m + jj, (k, m, m)).ravel()
+        keep = i <= j
+        rows.append(ku + i[keep] - j[keep]); cols.append(j[keep]); src.append(base + np.flatnonzero(keep))
+        base += k * m * m
+    return np.concatenate(rows), np.concatenate(cols), np.concatenate(src)
+
+
 @dataclass
 class Normal:
     """Gauss–Newton normal equations ``A dx = -b`` of a take in block form: frame blocks ``diag`` ``(n, 33, 33)``,
@@ -384,36 +409,34 @@ class Normal:
     bg: np.ndarray
 
     def solve(self, lam: float) -> np.ndarray:
-        """``dx`` (globals first, then frames) of ``(A + lam diag(A)) dx = -b``: sparse LU of the banded frame
-        block in its natural order (no fill-in outside the band; ``scipy.sparse.linalg.splu``), Schur
-        complement for the globals. Linear in the number of frames."""
-        import scipy.sparse as sp  # imported where it is used: 0.2 s, not paid by a cached run
-        from scipy.sparse.linalg import splu
+        """``dx`` (globals first, then frames) of ``(A + lam diag(A)) dx = -b``: banded Cholesky of the frame
+        block (LAPACK ``dpbtrf``/``dpbtrs``: the blocks (t, t±1), (t, t±2) are a band of ``3 m - 1``
+        superdiagonals, no fill-in outside it), Schur complement for the globals. Linear in the number of
+        frames. Raises ``LinAlgError`` when the damped matrix is not positive definite."""
+        from scipy.linalg import lapack  # imported where it is used: not paid by a cached run
 
         n, m = self.bf.shape
         N = n * m
-        ii, jj = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
-        t = np.arange(n)[:, None, None]
-        rows, cols, vals = [], [], []
-        for off, blk in ((0, self.diag), (1, self.up1), (2, self.up2)):
-            if n - off <= 0:
-                continue
-            r = np.broadcast_to(t[: n - off] * m + ii, (n - off, m, m)).ravel()
-            c = np.broadcast_to((t[: n - off] + off) * m + jj, (n - off, m, m)).ravel()
-            v = blk[: n - off].ravel()
-            rows.append(r); cols.append(c); vals.append(v)
-            if off:
-                rows.append(c); cols.append(r); vals.append(v)
-        dg = np.einsum("tii->ti", self.diag).ravel()
-        rows.append(np.arange(N)); cols.append(np.arange(N)); vals.append(lam * dg + 1e-9)
-        A = sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(N, N))
-        lu = splu(A, permc_spec="NATURAL", diag_pivot_thresh=0.0, options=dict(SymmetricMode=True))
+        rows, cols, src = _band_pattern(n, m)
+        diag = self.diag.copy()
+        k = np.arange(m)
+        diag[:, k, k] += lam * diag[:, k, k] + 1e-9
+        vals = np.concatenate([diag.ravel(), self.up1[: max(n - 1, 0)].ravel(), self.up2[: max(n - 2, 0)].ravel()])
+        ab = np.zeros((3 * m, N), order="F")
+        ab[rows, cols] = vals[src]
+        chol, info = lapack.dpbtrf(ab, lower=0, overwrite_ab=1)
+        if info != 0:
+            raise np.linalg.LinAlgError(f"frame matrix not positive definite (dpbtrf info {info})")
+
+        def back(rhs: np.ndarray) -> np.ndarray:  # A^-1 rhs from the factor
+            return lapack.dpbtrs(chol, rhs, lower=0)[0]
+
         bf = self.bf.reshape(N)
         G = self.D.shape[0]
         if G == 0:
-            return -lu.solve(bf)
+            return -back(bf)
         C = self.C.reshape(N, G)
-        Y = lu.solve(np.ascontiguousarray(np.concatenate([C, bf[:, None]], axis=1)))
+        Y = back(np.ascontiguousarray(np.concatenate([C, bf[:, None]], axis=1)))
         D = self.D + np.diag(lam * np.diag(self.D) + 1e-12)
         S = D - C.T @ Y[:, :G]
         dgl = np.linalg.solve(S, self.bg - C.T @ Y[:, G])
@@ -438,11 +461,26 @@ class Normal:
         return np.array(cols).T
 
 
+#: Frame copies evaluated together by the finite differences of :func:`normal_equations` (unknowns perturbed in
+#: one vectorised call): fewer, larger array operations on short takes, memory bounded on long ones.
+FD_BATCH_FRAMES = 2048
+
+
+def _gram(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Per-frame ``Aᵀ B``: ``(t, r, i)``, ``(t, r, j)`` -> ``(t, i, j)`` (batched BLAS; ``einsum`` is ~20x slower here)."""
+    return np.matmul(np.swapaxes(A, 1, 2), B)
+
+
+def _gram_vec(A: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Per-frame ``Aᵀ v``: ``(t, r, i)``, ``(t, r)`` -> ``(t, i)``."""
+    return np.matmul(np.swapaxes(A, 1, 2), v[..., None])[..., 0]
+
+
 def normal_equations(prob: "TakeProblem", x: np.ndarray, h: float = 1e-6) -> tuple[Normal, float]:
     """The Gauss–Newton normal equations of ``prob`` at ``x`` (blocks, see :class:`Normal`) and the cost.
 
     Frame unknowns: one forward difference per unknown index, perturbed in every frame at once (a frame's own
-    residuals depend on its own unknowns only); accelerations and slides by the chain rule through the
+    residuals depend on its own unknowns only), several indices per vectorised call (:data:`FD_BATCH_FRAMES`); accelerations and slides by the chain rule through the
     joints' differences; globals: one forward difference of the whole residual each."""
     n, G, F, m = prob.n, prob.n_glob, N_FRAME_RES, PER_FRAME
     g = prob.globals_of(x)
@@ -453,14 +491,16 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray, h: float = 1e-6) -> tup
     nf = prob.floor(g)[0]
     dR = np.empty((n, F, m))
     dP = np.empty((n, N_JOINTS * 3, m))
-    for i in range(m):
-        fp = fr.copy()
-        fp[:, i] += h
+    batch = max(1, FD_BATCH_FRAMES // max(n, 1))  # unknowns perturbed together: (batch, n, ...) copies of the take
+    for i0 in range(0, m, batch):
+        idx = np.arange(i0, min(i0 + batch, m))
+        fp = np.broadcast_to(fr, (len(idx),) + fr.shape).copy()
+        fp[np.arange(len(idx)), :, idx] += h
         Pi = prob.joints_from_frames(fp, L)
-        dR[:, :, i] = (prob.frame_terms(Pi, g) - R0) / h
-        dP[:, :, i] = (Pi - P0).reshape(n, -1) / h
-    diag = np.einsum("tri,trj->tij", dR, dR)
-    bf = np.einsum("tri,tr->ti", dR, R0)
+        dR[:, :, idx] = np.moveaxis((prob.frame_terms(Pi, g) - R0) / h, 0, -1)
+        dP[:, :, idx] = np.moveaxis((Pi - P0).reshape(len(idx), n, -1) / h, 0, -1)
+    diag = _gram(dR, dR)
+    bf = _gram_vec(dR, R0)
     up1 = np.zeros((n, m, m))
     up2 = np.zeros((n, m, m))
     acc, slide = prob.coupled_terms(P0, nf)
@@ -470,9 +510,9 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray, h: float = 1e-6) -> tup
         c = (1.0, -2.0, 1.0)
         mask = prob.d.acc_mask()[:, None, None]
         for k in range(3):
-            bf[k:n - 2 + k] += c[k] * np.einsum("tmi,tm->ti", dPs[k:n - 2 + k], acc)
+            bf[k:n - 2 + k] += c[k] * _gram_vec(dPs[k:n - 2 + k], acc)
             for l in range(k, 3):
-                blk = mask * c[k] * c[l] * np.einsum("tmi,tmj->tij", dPs[k:n - 2 + k], dPs[l:n - 2 + l])
+                blk = mask * c[k] * c[l] * _gram(dPs[k:n - 2 + k], dPs[l:n - 2 + l])
                 if l == k:
                     diag[k:n - 2 + k] += blk
                 elif l - k == 1:
@@ -487,12 +527,12 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray, h: float = 1e-6) -> tup
     d_now = np.einsum("tac,tacp->tap", u, dPa) / prob.w.sigma_slide  # (n, 2, m) on frame t
     d_prev = np.zeros_like(d_now)
     d_prev[1:] = -np.einsum("tac,tacp->tap", u[1:], dPa[:-1]) / prob.w.sigma_slide  # row t, on frame t-1
-    diag += np.einsum("tai,taj->tij", d_now, d_now)
-    bf += np.einsum("tai,ta->ti", d_now, slide)
+    diag += _gram(d_now, d_now)
+    bf += _gram_vec(d_now, slide)
     if n > 1:
-        diag[:-1] += np.einsum("tai,taj->tij", d_prev[1:], d_prev[1:])
-        up1[:-1] += np.einsum("tai,taj->tij", d_prev[1:], d_now[1:])
-        bf[:-1] += np.einsum("tai,ta->ti", d_prev[1:], slide[1:])
+        diag[:-1] += _gram(d_prev[1:], d_prev[1:])
+        up1[:-1] += _gram(d_prev[1:], d_now[1:])
+        bf[:-1] += _gram_vec(d_prev[1:], slide[1:])
     r_full = np.concatenate([R0.ravel(), acc.ravel(), slide.ravel(), prob.global_terms(g)])
     cost = 0.5 * float(r_full @ r_full)
     D = np.zeros((G, G))
@@ -507,18 +547,18 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray, h: float = 1e-6) -> tup
         D = Jg.T @ Jg
         bg = Jg.T @ r_full
         Jf = Jg[: n * F].reshape(n, F, G)
-        C = np.einsum("tri,trg->tig", dR, Jf)
+        C = _gram(dR, Jf)
         if n > 2:  # accelerations depend on globals too when bone lengths are free
             Ja = Jg[n * F: n * F + (n - 2) * N_JOINTS * 3].reshape(n - 2, N_JOINTS * 3, G)
             s_acc = prob.acc_scale[None, :, None]
             am = prob.d.acc_mask()[:, None, None]
             for k, ck in enumerate((1.0, -2.0, 1.0)):
-                C[k:n - 2 + k] += ck * np.einsum("tmi,tmg->tig", dP[k:n - 2 + k] * s_acc, Ja * am)
+                C[k:n - 2 + k] += ck * _gram(dP[k:n - 2 + k] * s_acc, Ja * am)
         base = n * F + max(n - 2, 0) * N_JOINTS * 3
         Js = Jg[base: base + 2 * n].reshape(n, 2, G)
-        C += np.einsum("tai,tag->tig", d_now, Js)
+        C += _gram(d_now, Js)
         if n > 1:
-            C[:-1] += np.einsum("tai,tag->tig", d_prev[1:], Js[1:])
+            C[:-1] += _gram(d_prev[1:], Js[1:])
     return Normal(diag, up1, up2, bf, D, C, bg), cost
 
 
