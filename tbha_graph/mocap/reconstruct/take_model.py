@@ -461,11 +461,6 @@ class Normal:
         return np.array(cols).T
 
 
-#: Frame copies evaluated together by the finite differences of :func:`normal_equations` (unknowns perturbed in
-#: one vectorised call): fewer, larger array operations on short takes, memory bounded on long ones.
-FD_BATCH_FRAMES = 2048
-
-
 def _gram(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """Per-frame ``Aᵀ B``: ``(t, r, i)``, ``(t, r, j)`` -> ``(t, i, j)`` (batched BLAS; ``einsum`` is ~20x slower here)."""
     return np.matmul(np.swapaxes(A, 1, 2), B)
@@ -479,9 +474,11 @@ def _gram_vec(A: np.ndarray, v: np.ndarray) -> np.ndarray:
 def normal_equations(prob: "TakeProblem", x: np.ndarray, h: float = 1e-6) -> tuple[Normal, float]:
     """The Gauss–Newton normal equations of ``prob`` at ``x`` (blocks, see :class:`Normal`) and the cost.
 
-    Frame unknowns: one forward difference per unknown index, perturbed in every frame at once (a frame's own
-    residuals depend on its own unknowns only), several indices per vectorised call (:data:`FD_BATCH_FRAMES`); accelerations and slides by the chain rule through the
-    joints' differences; globals: one forward difference of the whole residual each."""
+    Frame unknowns: the analytic per-frame Jacobian (:mod:`.take_jacobian`; a frame's own residuals depend on its
+    own unknowns only); accelerations and slides by the chain rule through the
+    joints' differences; globals: one central difference of the whole residual each."""
+    from .take_jacobian import joint_jacobian, residual_jacobian  # here: that module builds on this one
+
     n, G, F, m = prob.n, prob.n_glob, N_FRAME_RES, PER_FRAME
     g = prob.globals_of(x)
     fr = prob.frames_of(x)
@@ -489,16 +486,8 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray, h: float = 1e-6) -> tup
     P0 = prob.joints_from_frames(fr, L)
     R0 = prob.frame_terms(P0, g)
     nf = prob.floor(g)[0]
-    dR = np.empty((n, F, m))
-    dP = np.empty((n, N_JOINTS * 3, m))
-    batch = max(1, FD_BATCH_FRAMES // max(n, 1))  # unknowns perturbed together: (batch, n, ...) copies of the take
-    for i0 in range(0, m, batch):
-        idx = np.arange(i0, min(i0 + batch, m))
-        fp = np.broadcast_to(fr, (len(idx),) + fr.shape).copy()
-        fp[np.arange(len(idx)), :, idx] += h
-        Pi = prob.joints_from_frames(fp, L)
-        dR[:, :, idx] = np.moveaxis((prob.frame_terms(Pi, g) - R0) / h, 0, -1)
-        dP[:, :, idx] = np.moveaxis((Pi - P0).reshape(len(idx), n, -1) / h, 0, -1)
+    dP = joint_jacobian(prob, fr, L).reshape(n, N_JOINTS * 3, m)
+    dR = residual_jacobian(prob, P0, g).reshape(n, F, N_JOINTS * 3) @ dP  # (n, F, m)
     diag = _gram(dR, dR)
     bf = _gram_vec(dR, R0)
     up1 = np.zeros((n, m, m))
@@ -541,9 +530,10 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray, h: float = 1e-6) -> tup
     if G:
         Jg = np.empty((r_full.size, G))
         for i in range(G):
-            xp = x.copy()
+            xp, xm = x.copy(), x.copy()
             xp[i] += h
-            Jg[:, i] = (prob.residuals(xp) - r_full) / h
+            xm[i] -= h
+            Jg[:, i] = (prob.residuals(xp) - prob.residuals(xm)) / (2.0 * h)
         D = Jg.T @ Jg
         bg = Jg.T @ r_full
         Jf = Jg[: n * F].reshape(n, F, G)

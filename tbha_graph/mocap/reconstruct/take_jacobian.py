@@ -1,0 +1,191 @@
+"""Analytic Jacobian of the per-frame residuals of :class:`.take_model.TakeProblem` with respect to each
+frame's own unknowns (root position and bone-direction tangents).
+
+Two factors, both per frame and vectorised over frames:
+
+* ``dP/dx`` ``(n, 48, 33)``: joints by frame unknowns. The root moves every joint; a bone's tangent ``(a, b)``
+  turns its direction ``unit(ref + a e1 + b e2)`` and so moves the joint at its end and every joint below it
+  by the bone's length times that turn (:func:`joint_jacobian`).
+* ``dR/dP`` ``(n, F, 48)``: residuals by joint coordinates, from the closed-form derivatives of each term of
+  :meth:`.take_model.TakeProblem.frame_terms` (unit vectors, cross products, the pinhole projection, the
+  soft-L1 rescaling) (:func:`residual_jacobian`).
+
+Their product is the frame block of the Jacobian that :func:`.take_model.normal_equations` needs; a test
+checks it against finite differences. Camera frame, metres; residuals in units of their sigmas.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..skeleton import N_JOINTS, PARENTS
+from .take_model import (ANKLES, AXIS_TRIPLES, HINGES, J, N_BONES, N_FRAME_RES, PELVIS_SIDE, PER_FRAME, TORSO_PAIRS,
+                         TakeProblem, unit)
+
+_EYE = np.eye(3)
+#: Joints of the thorax's and the pelvis's front ``(l, r, up, lo)``: front = unit((l - r) x (up - lo)).
+THORAX_JOINTS = (J["left_shoulder"], J["right_shoulder"], J["neck"], J["chest"])
+PELVIS_JOINTS = (J["left_hip"], J["right_hip"], J["chest"], J["hips"])
+
+
+def _subtree() -> np.ndarray:
+    """``(16, 15)`` bool: joint k lies at or below the end of bone b (bone b ends at joint b + 1)."""
+    below = np.zeros((N_JOINTS, N_BONES), dtype=bool)
+    for k in range(1, N_JOINTS):
+        j = k
+        while j > 0:
+            below[k, j - 1] = True
+            j = int(PARENTS[j])
+    return below
+
+
+SUBTREE = _subtree()
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """``[v]x`` ``(..., 3, 3)`` with ``[v]x w = v x w``."""
+    z = np.zeros(v.shape[:-1])
+    return np.stack([np.stack([z, -v[..., 2], v[..., 1]], -1), np.stack([v[..., 2], z, -v[..., 0]], -1),
+                     np.stack([-v[..., 1], v[..., 0], z], -1)], -2)
+
+
+def unit_jacobian(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``unit(v)`` ``(..., 3)`` and its derivative ``(I - u uᵀ) / |v|`` ``(..., 3, 3)`` (as :func:`.take_model.unit`)."""
+    norm = np.maximum(np.sqrt(np.einsum("...i,...i->...", v, v)), 1e-9)
+    u = v / norm[..., None]
+    return u, (_EYE - u[..., :, None] * u[..., None, :]) / norm[..., None, None]
+
+
+def front_jacobian(P: np.ndarray, joints: tuple[int, int, int, int]) -> tuple[np.ndarray, list[np.ndarray]]:
+    """A front ``unit((P_l - P_r) x (P_up - P_lo))`` ``(n, 3)`` and its derivatives by ``P_l, P_r, P_up, P_lo``
+    (four ``(n, 3, 3)``)."""
+    l, r, up, lo = (P[:, k] for k in joints)
+    a, b = l - r, up - lo
+    f, Fc = unit_jacobian(np.cross(a, b))
+    da = Fc @ -skew(b)  # d(a x b) = -[b]x da + [a]x db
+    db = Fc @ skew(a)
+    return f, [da, -da, db, -db]
+
+
+def joint_jacobian(prob: TakeProblem, fr: np.ndarray, L: np.ndarray) -> np.ndarray:
+    """``dP/dx`` ``(n, 16, 3, PER_FRAME)`` of :meth:`.take_model.TakeProblem.joints_from_frames` at frame
+    unknowns ``fr`` ``(n, PER_FRAME)`` with bone lengths ``L`` ``(16,)``."""
+    n = fr.shape[0]
+    tangent = fr[:, 3:].reshape(n, N_BONES, 2)
+    _, D = unit_jacobian(prob.ref + tangent[..., 0:1] * prob.e1 + tangent[..., 1:2] * prob.e2)  # (n, 15, 3, 3)
+    turn = np.stack([D @ prob.e1[..., None], D @ prob.e2[..., None]], axis=-1)[..., 0, :]  # (n, 15, 3, 2)
+    turn = turn * L[1:, None, None]
+    out = np.zeros((n, N_JOINTS, 3, PER_FRAME))
+    out[..., :3] = _EYE
+    turn = np.moveaxis(turn, 1, 2)[:, None]  # (n, 1, 3, 15, 2)
+    out[..., 3:] = (SUBTREE[None, :, None, :, None] * turn).reshape(n, N_JOINTS, 3, 2 * N_BONES)
+    return out
+
+
+def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """``dR/dP`` ``(n, N_FRAME_RES, 16, 3)`` of :meth:`.take_model.TakeProblem.frame_terms` at joints ``P``
+    ``(n, 16, 3)`` under globals ``g``."""
+    w, d = prob.w, prob.d
+    n = P.shape[0]
+    out = np.zeros((n, N_FRAME_RES, N_JOINTS, 3))
+    thorax, d_thorax = front_jacobian(P, THORAX_JOINTS)
+    pelvis, d_pelvis = front_jacobian(P, PELVIS_JOINTS)
+    row = 2 * N_JOINTS
+    _reprojection(prob, P, g, thorax, d_thorax, pelvis, d_pelvis, out)
+    # torso distances
+    for k, (a, b) in enumerate(TORSO_PAIRS):
+        u = unit(P[:, a] - P[:, b]) / w.sigma_torso
+        out[:, row + k, a] += u
+        out[:, row + k, b] -= u
+    row += len(TORSO_PAIRS)
+    # hinges: min(sign * inside . fwd, 0)
+    for k, (jt, a, b, sign) in enumerate(HINGES):
+        ua, Ua = unit_jacobian(P[:, a] - P[:, jt])
+        ub, Ub = unit_jacobian(P[:, b] - P[:, jt])
+        inside = ua + ub
+        fwd, dfwd, fj = (pelvis, d_pelvis, PELVIS_JOINTS) if sign < 0 else (thorax, d_thorax, THORAX_JOINTS)
+        active = (sign * np.sum(inside * fwd, axis=-1) < 0.0)[:, None] * (sign / w.sigma_hinge)
+        gi = (fwd[:, None, :] @ Ua)[:, 0] * active  # d/dP_a through inside
+        gb = (fwd[:, None, :] @ Ub)[:, 0] * active
+        out[:, row + k, a] += gi
+        out[:, row + k, b] += gb
+        out[:, row + k, jt] -= gi + gb
+        for jj, Dj in zip(fj, dfwd):
+            out[:, row + k, jj] += (inside[:, None, :] @ Dj)[:, 0] * active
+    row += len(HINGES)
+    # ankles below the floor / planted ankles above their band
+    nf, dfl = prob.floor(g)
+    h = P[:, ANKLES] @ nf + dfl - d.ankle_height
+    for k, a in enumerate(ANKLES):
+        out[:, row + k, a] = (h[:, k] < 0.0)[:, None] * nf / w.sigma_floor
+        out[:, row + 2 + k, a] = (d.contact[:, k] & (h[:, k] > w.contact_band))[:, None] * nf / w.sigma_floor
+    row += 4
+    # head along the neck
+    _, Uh = unit_jacobian(P[:, J["head"]] - P[:, J["neck"]])
+    _, Un = unit_jacobian(P[:, J["neck"]] - P[:, J["chest"]])
+    for c in range(3):
+        out[:, row + c, J["head"]] = Uh[:, c] / w.sigma_pose
+        out[:, row + c, J["neck"]] = (-Uh[:, c] - Un[:, c]) / w.sigma_pose
+        out[:, row + c, J["chest"]] = Un[:, c] / w.sigma_pose
+    row += 3
+    # twist: pelvis - thorax
+    for jj, Dj in zip(PELVIS_JOINTS, d_pelvis):
+        out[:, row:row + 3, jj] += Dj / w.sigma_twist
+    for jj, Dj in zip(THORAX_JOINTS, d_thorax):
+        out[:, row:row + 3, jj] -= Dj / w.sigma_twist
+    return out
+
+
+def _reprojection(prob: TakeProblem, P, g, thorax, d_thorax, pelvis, d_pelvis, out: np.ndarray) -> None:
+    """Add ``d rep / dP`` (rows ``0..31``: point j's u, v) to ``out`` ``(n, F, 16, 3)``."""
+    w, d = prob.w, prob.d
+    n = P.shape[0]
+    f = np.exp(g[0])
+    offs = prob.offsets(g)
+    o_al, o_out = offs[:, 0][None, :, None, None], offs[:, 1][None, :, None, None]
+    # limb axis through each point: unit(unit(m - a) + unit(b - m)); a == m or b == m gives a constant zero term
+    a_i, m_i, b_i = AXIS_TRIPLES[:, 0], AXIS_TRIPLES[:, 1], AXIS_TRIPLES[:, 2]
+    u1, U1 = unit_jacobian(P[:, m_i] - P[:, a_i])
+    u2, U2 = unit_jacobian(P[:, b_i] - P[:, m_i])
+    live1 = (a_i != m_i)[None, :, None, None]
+    live2 = (b_i != m_i)[None, :, None, None]
+    U1, U2 = U1 * live1, U2 * live2
+    u1, u2 = u1 * live1[..., 0], u2 * live2[..., 0]
+    axis, A = unit_jacobian(u1 + u2)  # (n, 16, 3), (n, 16, 3, 3)
+    side = PELVIS_SIDE[None, :, None]
+    front = np.where(side, pelvis[:, None], thorax[:, None])
+    fa = np.sum(front * axis, axis=-1)
+    outv, O = unit_jacobian(front - fa[..., None] * axis)
+    proj = _EYE - axis[..., :, None] * axis[..., None, :]  # d out-vector / d front (before O)
+    M = axis[..., :, None] * front[..., None, :] + fa[..., None, None] * _EYE  # minus d out-vector / d axis
+    d_axis = o_al * A + o_out * (O @ -M @ A)  # dQ per unit change of the axis' sum s, (n, 16, 3, 3)
+    Q = P + offs[:, 0][None, :, None] * axis + offs[:, 1][None, :, None] * outv
+    # d rep / dQ: soft-L1 of (f Q_xy / z + c - obs) * weight / sigma
+    zc = Q[..., 2]
+    z = np.maximum(zc, 1e-3)
+    s = d.weight / w.sigma_px  # (n, 16)
+    e = ((f * Q[..., :2] / z[..., None] + d.centre) - d.points) * s[..., None]
+    c = w.robust_scale
+    root = np.sqrt(1.0 + (e / c) ** 2)
+    rho = c * np.sqrt(2.0 * (root - 1.0))
+    small = np.abs(e) < 1e-6 * c
+    drho = np.where(small, 1.0, np.abs(e) / np.where(small, 1.0, root * rho))
+    de = np.zeros((n, N_JOINTS, 2, 3))
+    de[..., 0, 0] = de[..., 1, 1] = f / z
+    de[..., :, 2] = -(f * Q[..., :2] / z[..., None] ** 2) * (zc >= 1e-3)[..., None]
+    Gq = (drho * s[..., None])[..., None] * de  # (n, 16, 2, 3)
+    rows = np.arange(N_JOINTS)
+    view = out[:, : 2 * N_JOINTS].reshape(n, N_JOINTS, 2, N_JOINTS, 3)
+
+    def add(joints: np.ndarray, dQ: np.ndarray, mask: np.ndarray | None = None) -> None:
+        """Point j's rows += Gq_j dQ_j for joint ``joints[j]`` (each (point, joint) pair once per call)."""
+        contrib = Gq @ dQ
+        pts = rows if mask is None else rows[mask]
+        view[:, pts, :, joints[pts], :] += contrib[:, pts].transpose(1, 0, 2, 3)  # advanced axes come first
+
+    add(m_i, np.broadcast_to(_EYE, (n, N_JOINTS, 3, 3)) + d_axis @ (-U2 + U1))  # the point's own joint (m == j)
+    add(a_i, d_axis @ -U1, a_i != m_i)
+    add(b_i, d_axis @ U2, b_i != m_i)
+    for k in range(4):  # the front's four joints
+        D = np.where(side[..., None], d_pelvis[k][:, None], d_thorax[k][:, None])
+        joint = np.where(PELVIS_SIDE, PELVIS_JOINTS[k], THORAX_JOINTS[k])
+        add(joint, o_out * (O @ proj @ D))
