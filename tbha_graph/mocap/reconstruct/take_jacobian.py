@@ -81,16 +81,19 @@ def joint_jacobian(prob: TakeProblem, fr: np.ndarray, L: np.ndarray) -> np.ndarr
     return out
 
 
-def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray) -> np.ndarray:
+def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: dict | None = None) -> np.ndarray:
     """``dR/dP`` ``(n, N_FRAME_RES, 16, 3)`` of :meth:`.take_model.TakeProblem.frame_terms` at joints ``P``
-    ``(n, 16, 3)`` under globals ``g``."""
+    ``(n, 16, 3)`` under globals ``g``; ``parts`` (a dict, if given) receives the reprojection's pieces that
+    :func:`global_jacobian` reuses."""
     w, d = prob.w, prob.d
     n = P.shape[0]
     out = np.zeros((n, N_FRAME_RES, N_JOINTS, 3))
     thorax, d_thorax = front_jacobian(P, THORAX_JOINTS)
     pelvis, d_pelvis = front_jacobian(P, PELVIS_JOINTS)
     row = 2 * N_JOINTS
-    _reprojection(prob, P, g, thorax, d_thorax, pelvis, d_pelvis, out)
+    rep = _reprojection(prob, P, g, thorax, d_thorax, pelvis, d_pelvis, out)
+    if parts is not None:
+        parts.update(rep)
     # torso distances
     for k, (a, b) in enumerate(TORSO_PAIRS):
         u = unit(P[:, a] - P[:, b]) / w.sigma_torso
@@ -135,8 +138,10 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray) -> np.nda
     return out
 
 
-def _reprojection(prob: TakeProblem, P, g, thorax, d_thorax, pelvis, d_pelvis, out: np.ndarray) -> None:
-    """Add ``d rep / dP`` (rows ``0..31``: point j's u, v) to ``out`` ``(n, F, 16, 3)``."""
+def _reprojection(prob: TakeProblem, P, g, thorax, d_thorax, pelvis, d_pelvis, out: np.ndarray) -> dict:
+    """Add ``d rep / dP`` (rows ``0..31``: point j's u, v) to ``out`` ``(n, F, 16, 3)``; returns what the globals'
+    derivatives reuse: ``Gq`` (d rep / d point, ``(n, 16, 2, 3)``), the points' ``axis`` and ``out`` directions
+    ``(n, 16, 3)`` and ``dlogf`` (d rep / d log f, ``(n, 16, 2)``)."""
     w, d = prob.w, prob.d
     n = P.shape[0]
     f = np.exp(g[0])
@@ -189,3 +194,75 @@ def _reprojection(prob: TakeProblem, P, g, thorax, d_thorax, pelvis, d_pelvis, o
         D = np.where(side[..., None], d_pelvis[k][:, None], d_thorax[k][:, None])
         joint = np.where(PELVIS_SIDE, PELVIS_JOINTS[k], THORAX_JOINTS[k])
         add(joint, o_out * (O @ proj @ D))
+    return {"Gq": Gq, "axis": axis, "out": outv, "dlogf": drho * s[..., None] * (f * Q[..., :2] / z[..., None])}
+
+
+def global_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, dRdP: np.ndarray, parts: dict) -> np.ndarray:
+    """Jacobian ``(n_residuals, G)`` of the whole residual vector (:meth:`.take_model.TakeProblem.residuals`
+    order: frame blocks, accelerations, slides, global priors) by the globals: ``log f``, the floor's tangent
+    update (2) and offset, the point offsets (32, when free) and the bone-length log-updates (15, when free).
+    ``P`` ``(n, 16, 3)`` joints, ``dRdP`` ``(n, F, 48)`` and ``parts`` from :func:`residual_jacobian`."""
+    w, d, lay = prob.w, prob.d, prob.layout
+    n, F, G = P.shape[0], N_FRAME_RES, prob.n_glob
+    n_acc = max(n - 2, 0)
+    Jf = np.zeros((n, F, G))
+    Ja = np.zeros((n_acc, N_JOINTS * 3, G))
+    Js = np.zeros((n, 2, G))
+    Jp = []
+    # focal: the image scales about the centre
+    Jf[:, : 2 * N_JOINTS, 0] = parts["dlogf"].reshape(n, -1)
+    # floor: ankle heights h = P_a . nf + d and the slides' horizontal projection
+    f1 = unit_jacobian(prob.n_ref + g[1] * prob.f1 + g[2] * prob.f2)[1] @ np.stack([prob.f1, prob.f2], axis=1)  # (3, 2)
+    nf, dfl = prob.floor(g)
+    h = P[:, ANKLES] @ nf + dfl - d.ankle_height
+    below = (h < 0.0) / w.sigma_floor
+    above = (d.contact & (h > w.contact_band)) / w.sigma_floor
+    dh = np.concatenate([P[:, ANKLES] @ f1, np.ones((n, 2, 1))], axis=-1)  # (n, 2, 3): d h / d (g1, g2, d)
+    row = 2 * N_JOINTS + len(TORSO_PAIRS) + len(HINGES)
+    Jf[:, row:row + 2, 1:4] = below[..., None] * dh
+    Jf[:, row + 2:row + 4, 1:4] = above[..., None] * dh
+    step, both = prob.slide_vectors(P, nf)
+    u = np.where(both[..., None], step / np.maximum(np.linalg.norm(step, axis=-1, keepdims=True), 1e-9), 0.0)
+    s_raw = np.zeros_like(step)
+    s_raw[1:] = P[1:, ANKLES] - P[:-1, ANKLES]
+    # slide = |s - (s.nf) nf| / sigma; u is horizontal, so d slide = -(s.nf) (u . d nf) / sigma
+    Js[..., 1:3] = -(np.sum(s_raw * nf, axis=-1)[..., None] * (u @ f1)) / w.sigma_slide
+    k = 4
+    if lay.free_offsets:  # point j moved along its axis / out of the body: d rep = Gq_j (axis_j | out_j)
+        Gq = parts["Gq"]
+        along = (Gq @ parts["axis"][..., None])[..., 0]  # (n, 16, 2)
+        outw = (Gq @ parts["out"][..., None])[..., 0]
+        cols = k + 2 * np.arange(N_JOINTS)
+        for j in range(N_JOINTS):
+            Jf[:, 2 * j:2 * j + 2, cols[j]] = along[:, j]
+            Jf[:, 2 * j:2 * j + 2, cols[j] + 1] = outw[:, j]
+        Jp.append(np.eye(2 * N_JOINTS) / w.sigma_offset)
+        k += 2 * N_JOINTS
+    if lay.free_lengths:  # bone b longer: every joint below it moves along the bone
+        dirs = unit(P[:, 1:] - P[:, PARENTS[1:]])  # (n, 15, 3)
+        L = prob.lengths_of(g)
+        dPdL = SUBTREE[None, :, None, :] * (L[1:] * np.swapaxes(dirs, 1, 2))[:, None]  # (n, 16, 3, 15)
+        dPdL = dPdL.reshape(n, N_JOINTS * 3, N_BONES)
+        Jf[..., k:k + N_BONES] = dRdP @ dPdL
+        if n_acc:
+            second = dPdL[2:] - 2.0 * dPdL[1:-1] + dPdL[:-2]
+            Ja[..., k:k + N_BONES] = second * prob.acc_scale[None, :, None] * d.acc_mask()[:, None, None]
+        dA = dPdL.reshape(n, N_JOINTS, 3, N_BONES)[:, ANKLES]  # (n, 2, 3, 15)
+        ds = np.zeros_like(dA)
+        ds[1:] = dA[1:] - dA[:-1]
+        Js[..., k:k + N_BONES] = np.einsum("tac,tacb->tab", u, ds) / w.sigma_slide
+        Jp.append(np.eye(N_BONES) / w.sigma_length)
+        k += N_BONES
+    prior = np.zeros((0, G))
+    if Jp:
+        prior = np.zeros((sum(b.shape[0] for b in Jp), G))
+        r0, c0 = 0, 4
+        for b in Jp:
+            prior[r0:r0 + b.shape[0], c0:c0 + b.shape[1]] = b
+            r0 += b.shape[0]
+            c0 += b.shape[1]
+    if prob.focal_prior is not None:
+        fp = np.zeros((1, G))
+        fp[0, 0] = 1.0 / prob.focal_prior[1]
+        prior = np.concatenate([prior, fp])
+    return np.concatenate([Jf.reshape(n * F, G), Ja.reshape(-1, G), Js.reshape(n * 2, G), prior])

@@ -21,7 +21,7 @@ above the floor, no ankle goes below it) and a weak prior of the point offsets a
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import cached_property, lru_cache
+from functools import cached_property
 
 import numpy as np
 
@@ -373,25 +373,21 @@ class TakeProblem:
         return out
 
 
-@lru_cache(maxsize=64)
-def _band_pattern(n: int, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Where the frame blocks go in LAPACK's upper band storage of the symmetric frame matrix (``n`` blocks of
-    ``m`` unknowns; blocks (t, t), (t, t+1), (t, t+2); ``ku = 3 m - 1`` superdiagonals): ``(rows, cols, src)``
-    with ``ab[rows, cols] = values[src]``, ``values`` = the raveled ``[diag blocks (n), up1 blocks (n - 1),
-    up2 blocks (n - 2)]`` (the diagonal blocks' lower triangles are not stored). Computed once per shape."""
-    ku = 3 * m - 1
-    ii, jj = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
-    rows, cols, src = [], [], []
-    base = 0
-    for off in (0, 1, 2):
-        k = max(n - off, 0)
-        t = np.arange(k)[:, None, None]
-        i = np.broadcast_to(t * m + ii, (k, m, m)).ravel()
-        j = np.broadcast_to((t + off) * m + jj, (k, m, m)).ravel()
-        keep = i <= j
-        rows.append(ku + i[keep] - j[keep]); cols.append(j[keep]); src.append(base + np.flatnonzero(keep))
-        base += k * m * m
-    return np.concatenate(rows), np.concatenate(cols), np.concatenate(src)
+def lower_band(diag: np.ndarray, up1: np.ndarray, up2: np.ndarray) -> np.ndarray:
+    """LAPACK's lower band storage ``(3 m, n m)`` (``ab[i - j, j] = A[i, j]``, ``3 m - 1`` subdiagonals) of the
+    symmetric block-banded matrix with diagonal blocks ``diag`` and upper blocks ``up1`` (t, t+1), ``up2``
+    (t, t+2), each ``(n, m, m)``. Each block column ``[diag; up1ᵀ; up2ᵀ]`` is read along its diagonals by a
+    strided view (no index arrays), then copied once."""
+    from numpy.lib.stride_tricks import as_strided
+
+    n, m, _ = diag.shape
+    K = np.zeros((n, 4 * m, m))  # block column t: rows of blocks (t, t), (t+1, t), (t+2, t), then zeros
+    K[:, :m] = diag
+    K[:-1, m:2 * m] = np.swapaxes(up1[:-1], 1, 2)
+    K[:-2, 2 * m:3 * m] = np.swapaxes(up2[:-2], 1, 2)
+    st = K.strides
+    skew = as_strided(K, shape=(n, 3 * m, m), strides=(st[0], st[1], st[1] + st[2]), writeable=False)  # [t, d, c] = K[t, c + d, c]
+    return np.asfortranarray(skew.transpose(1, 0, 2).reshape(3 * m, n * m))
 
 
 @dataclass
@@ -411,25 +407,21 @@ class Normal:
     def solve(self, lam: float) -> np.ndarray:
         """``dx`` (globals first, then frames) of ``(A + lam diag(A)) dx = -b``: banded Cholesky of the frame
         block (LAPACK ``dpbtrf``/``dpbtrs``: the blocks (t, t±1), (t, t±2) are a band of ``3 m - 1``
-        superdiagonals, no fill-in outside it), Schur complement for the globals. Linear in the number of
+        subdiagonals, no fill-in outside it; :func:`lower_band`), Schur complement for the globals. Linear in the number of
         frames. Raises ``LinAlgError`` when the damped matrix is not positive definite."""
         from scipy.linalg import lapack  # imported where it is used: not paid by a cached run
 
         n, m = self.bf.shape
         N = n * m
-        rows, cols, src = _band_pattern(n, m)
         diag = self.diag.copy()
         k = np.arange(m)
         diag[:, k, k] += lam * diag[:, k, k] + 1e-9
-        vals = np.concatenate([diag.ravel(), self.up1[: max(n - 1, 0)].ravel(), self.up2[: max(n - 2, 0)].ravel()])
-        ab = np.zeros((3 * m, N), order="F")
-        ab[rows, cols] = vals[src]
-        chol, info = lapack.dpbtrf(ab, lower=0, overwrite_ab=1)
+        chol, info = lapack.dpbtrf(lower_band(diag, self.up1, self.up2), lower=1, overwrite_ab=1)
         if info != 0:
             raise np.linalg.LinAlgError(f"frame matrix not positive definite (dpbtrf info {info})")
 
         def back(rhs: np.ndarray) -> np.ndarray:  # A^-1 rhs from the factor
-            return lapack.dpbtrs(chol, rhs, lower=0)[0]
+            return lapack.dpbtrs(chol, rhs, lower=1)[0]
 
         bf = self.bf.reshape(N)
         G = self.D.shape[0]
@@ -471,13 +463,13 @@ def _gram_vec(A: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.matmul(np.swapaxes(A, 1, 2), v[..., None])[..., 0]
 
 
-def normal_equations(prob: "TakeProblem", x: np.ndarray, h: float = 1e-6) -> tuple[Normal, float]:
+def normal_equations(prob: "TakeProblem", x: np.ndarray) -> tuple[Normal, float]:
     """The Gauss–Newton normal equations of ``prob`` at ``x`` (blocks, see :class:`Normal`) and the cost.
 
-    Frame unknowns: the analytic per-frame Jacobian (:mod:`.take_jacobian`; a frame's own residuals depend on its
-    own unknowns only); accelerations and slides by the chain rule through the
-    joints' differences; globals: one central difference of the whole residual each."""
-    from .take_jacobian import joint_jacobian, residual_jacobian  # here: that module builds on this one
+    Jacobians are analytic (:mod:`.take_jacobian`): the frame unknowns' per frame (a frame's own residuals depend
+    on its own unknowns only), accelerations and slides by the chain rule through the joints' differences, and
+    the globals' for the whole residual vector."""
+    from .take_jacobian import global_jacobian, joint_jacobian, residual_jacobian  # here: that module builds on this one
 
     n, G, F, m = prob.n, prob.n_glob, N_FRAME_RES, PER_FRAME
     g = prob.globals_of(x)
@@ -487,7 +479,9 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray, h: float = 1e-6) -> tup
     R0 = prob.frame_terms(P0, g)
     nf = prob.floor(g)[0]
     dP = joint_jacobian(prob, fr, L).reshape(n, N_JOINTS * 3, m)
-    dR = residual_jacobian(prob, P0, g).reshape(n, F, N_JOINTS * 3) @ dP  # (n, F, m)
+    parts: dict = {}
+    dRdP = residual_jacobian(prob, P0, g, parts).reshape(n, F, N_JOINTS * 3)
+    dR = dRdP @ dP  # (n, F, m)
     diag = _gram(dR, dR)
     bf = _gram_vec(dR, R0)
     up1 = np.zeros((n, m, m))
@@ -528,12 +522,7 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray, h: float = 1e-6) -> tup
     C = np.zeros((n, m, G))
     bg = np.zeros(G)
     if G:
-        Jg = np.empty((r_full.size, G))
-        for i in range(G):
-            xp, xm = x.copy(), x.copy()
-            xp[i] += h
-            xm[i] -= h
-            Jg[:, i] = (prob.residuals(xp) - prob.residuals(xm)) / (2.0 * h)
+        Jg = global_jacobian(prob, P0, g, dRdP, parts)
         D = Jg.T @ Jg
         bg = Jg.T @ r_full
         Jf = Jg[: n * F].reshape(n, F, G)
