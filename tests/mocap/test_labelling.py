@@ -317,3 +317,65 @@ def test_left_right_twins_reacquired_by_a_guess_stay_flagged(seed_model):
     assert out["tracked"][back][:, [J["left_knee"], J["right_knee"]]].any(axis=1).all()
     assert (out["doubtful"][back] & DOUBT["ambiguous identity"]).all()
     assert not (out["doubtful"][:n0] & DOUBT["ambiguous identity"]).any()
+
+
+
+def _arm_lowered_then_torso_hidden(blob_at, gap=12, n1=8, also_seen=()):
+    """Seed suit: T-pose for 10 frames, the left arm lowered to hang down over 10 more (all seen), then only
+    the head for ``gap`` frames (the rest hidden: back turned or crouched), then also one magenta (wrist)
+    blob at ``blob_at`` (px) for ``n1`` frames (and the joints ``also_seen`` throughout). Returns the truth (the
+    left wrist at ``blob_at`` then), the visibility and the row where the blob appears."""
+    p0 = tpose_points()
+    down = p0.copy()
+    down[J["left_elbow"]] = p0[J["left_shoulder"]] + np.array([2.0, 45.0])
+    down[J["left_wrist"]] = p0[J["left_shoulder"]] + np.array([4.0, 82.0])
+    w = np.clip(np.arange(20 + gap + n1) - 9, 0, 10)[:, None, None] / 10.0
+    truth = (1 - w) * p0 + w * down
+    back = 20 + gap
+    truth[back:, J["left_wrist"]] = blob_at
+    visible = np.zeros((len(truth), N_JOINTS), bool)
+    visible[:20] = True
+    visible[:, [J["head"], *(J[n] for n in also_seen)]] = True
+    visible[back:, J["left_wrist"]] = True
+    return truth, visible, back
+
+
+def test_lost_twin_reacquired_from_the_head_when_clearly_one_side(seed_model):
+    """Only the head is seen when a wrist patch comes back where the left wrist was: neither twin has a
+    joint seen within two bones, the head is five bones away. With the offsets as last seen the blob is at
+    the left wrist's place, mirrored (had the actor turned round unseen) it is still clearly one twin's:
+    the left wrist takes it at once (before, it waited for its elbow or shoulder)."""
+    p0 = tpose_points()
+    truth, visible, back = _arm_lowered_then_torso_hidden(p0[J["left_shoulder"]] + np.array([4.0, 82.0]))
+    out = run_node(posture_kalman, detections=_detections(seed_model, truth, visible), colors=seed_model)["tracks"]
+    lw, rw = J["left_wrist"], J["right_wrist"]
+    assert out["tracked"][back:, lw].all()
+    np.testing.assert_allclose(out["points"][back:, lw], truth[back:, lw], atol=1e-3)
+    assert not out["tracked"][back:, rw].any()
+
+
+def test_lost_twin_waits_when_a_mirrored_body_would_not_tell(seed_model):
+    """The same, but the blob comes back 25 px from where the left wrist was last seen, about as near where
+    either wrist would be had the actor turned round unseen (offsets mirrored): the side is a guess, so
+    neither wrist takes it."""
+    p0 = tpose_points()
+    head, pl, pr = p0[J["head"]], p0[J["left_shoulder"]] + np.array([4.0, 82.0]), p0[J["right_wrist"]]
+    ml, mr = (np.array([2 * head[0] - q[0], q[1]]) for q in (pl, pr))  # mirrored about the head
+    mid, u = 0.5 * (ml + mr), np.array([-(mr - ml)[1], (mr - ml)[0]]) / np.linalg.norm(mr - ml)
+    blob = mid + u * np.dot(pl - mid, u)  # equidistant from both mirrored places, nearest the left wrist's
+    assert 15.0 < np.linalg.norm(blob - pl) < 35.0 and np.linalg.norm(blob - pr) > 120.0
+    truth, visible, back = _arm_lowered_then_torso_hidden(blob)
+    out = run_node(posture_kalman, detections=_detections(seed_model, truth, visible), colors=seed_model)["tracks"]
+    assert out["tracked"][:20].all()
+    assert not out["tracked"][back:][:, [J["left_wrist"], J["right_wrist"]]].any()
+
+
+def test_lost_twin_waits_for_a_short_anchor_while_the_torso_is_seen(seed_model):
+    """The first case with the neck patch seen throughout: the torso is not hidden, so the wrist (four bones
+    from the neck) is not re-acquired through that long chain; it waits for its elbow or shoulder."""
+    p0 = tpose_points()
+    truth, visible, back = _arm_lowered_then_torso_hidden(p0[J["left_shoulder"]] + np.array([4.0, 82.0]),
+                                                          also_seen=("neck",))
+    out = run_node(posture_kalman, detections=_detections(seed_model, truth, visible), colors=seed_model)["tracks"]
+    assert out["tracked"][back:, J["neck"]].all()
+    assert not out["tracked"][back:][:, [J["left_wrist"], J["right_wrist"]]].any()

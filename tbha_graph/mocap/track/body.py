@@ -73,29 +73,30 @@ class BodyBounds:
         """Farthest (px) joint ``j``'s patch can be from its parent's patch in the image now."""
         return self.scale * (REACH_SLACK * self.L0[j] + REACH_MARGIN_M * self.px_per_m)
 
-    def offset_now(self, j: int) -> np.ndarray:
+    def offset_now(self, j: int, facing: float | None = None) -> np.ndarray:
         """Joint ``j``'s expected offset from its parent now (last seen, rescaled, mirrored if the actor
-        turned round since), at most its reach."""
+        turned round since; ``facing``: +1 / -1 in place of the body's), at most its reach."""
         off = self.offset[j] * (self.scale / self.offset_scale[j])
-        if self.offset_facing[j] != self.facing:
+        if self.offset_facing[j] != (self.facing if facing is None else facing):
             off = off * np.array([-1.0, 1.0])
         n = float(np.linalg.norm(off))
         r = self.reach(j)
         return off * (r / n) if n > r else off
 
-    def anchor(self, j: int, seen: dict[int, tuple[np.ndarray, float]], max_bones: int = 2):
+    def anchor(self, j: int, seen: dict[int, tuple[np.ndarray, float]], max_bones: int = 2,
+               facing: float | None = None):
         """The nearest joint seen (``seen``: joint -> (point, slack px)) along the bones from ``j``:
         ``(point, reach, pred)`` = its point, how far ``j`` can be from it (reaches along the path plus
-        its slack) and where ``j`` is expected (its point plus the offsets along the path); None if no
-        seen joint is within ``max_bones`` bones."""
+        its slack) and where ``j`` is expected (its point plus the offsets along the path, as seen with
+        ``facing``, default the body's); None if no seen joint is within ``max_bones`` bones."""
         frontier = [(j, 0.0, np.zeros(2))]
         visited = {j}
         for _ in range(max_bones):
             nxt = []
             for a, reach, off in frontier:
                 par = int(PARENTS[a])
-                links = ([(par, self.reach(a), -self.offset_now(a))] if par >= 0 else []) + [
-                    (c, self.reach(c), self.offset_now(c)) for c in range(N_JOINTS) if PARENTS[c] == a]
+                links = ([(par, self.reach(a), -self.offset_now(a, facing))] if par >= 0 else []) + [
+                    (c, self.reach(c), self.offset_now(c, facing)) for c in range(N_JOINTS) if PARENTS[c] == a]
                 for b, r, o in links:
                     if b in visited:
                         continue

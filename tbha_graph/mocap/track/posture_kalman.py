@@ -9,9 +9,12 @@ pairs (the seed's suit) by their image order. Later frames (seed: "continuity of
 * a joint unseen for longer is **lost**: it is placed from its parent by the body (:mod:`.body`: its last
   seen offset, rescaled, mirrored when the actor has turned round, never farther than the bone can
   reach), not extrapolated; it is re-acquired by a candidate of its colour that its bones can reach from
-  the nearest joint seen in this frame (along the bones), nearest to where that joint puts it. A limb
-  with nothing seen to hang from waits (its identity would be a guess); the torso takes the candidate
-  nearest to where the body last had it;
+  the nearest joint seen in this frame (along the bones), nearest to where that joint puts it. Left/right
+  twins with nothing seen within two bones of either, while the torso is hidden, hang from a joint seen within
+  :data:`LONG_BONES` (the head), and take a blob only when it is clearly nearer one twin's expected place
+  both with their offsets as last seen and mirrored (the facing may have changed unseen); otherwise they
+  wait (their identity would be a guess); the torso takes the candidate nearest to where the body last
+  had it;
 * the candidates of each colour are assigned to that colour's joints globally
   (``scipy.optimize.linear_sum_assignment``; cost = distance over the joint's gate, with "not visible"
   as an option costing one gate), classes in the order of the body tree so parents are placed first;
@@ -55,6 +58,21 @@ _INF = 1e9
 #: fraction of the nearer one's distance; at least a quarter gate): their expected places, from offsets seen
 #: before the loss, are too stale to choose between closer calls
 TWIN_MARGIN = 0.5
+#: two lost left/right twins with no joint seen within two bones of either, while no torso patch (hips, chest,
+#: neck) is seen (the back turned, a crouch), are re-acquired from the nearest joint seen within this many bones
+#: (the head, for an arm's patch)
+LONG_BONES = 5
+#: ... by a blob nearer one twin's expected place than the other's by at least this many shoulder widths (at
+#: the body's scale) and by TWIN_MARGIN, both with the offsets as last seen and mirrored (the body's facing is
+#: stale while the torso is hidden); the nearer one as last seen takes it
+LONG_MARGIN = 0.25
+
+
+def _twins_close(dist: np.ndarray, floor_px: float) -> np.ndarray:
+    """(k,) bool: blobs two lost twins are about as near to, ``dist`` (2, k) px from where each is expected:
+    closer than ``floor_px`` or :data:`TWIN_MARGIN` of the nearer distance (inf - inf: not comparable)."""
+    with np.errstate(invalid="ignore"):
+        return np.abs(dist[0] - dist[1]) < np.maximum(floor_px, TWIN_MARGIN * np.minimum(dist[0], dist[1]))
 
 
 class PostureKalmanParams(StartParams):
@@ -180,6 +198,8 @@ class KalmanTracker:
             cost = np.full((m, k + m), _INF)
             cost[np.arange(m), k + np.arange(m)] = 1.0
             expected_dist = np.full((m, k), np.inf)  # lost joints: px from where the body expects them
+            far = False  # lost twins anchored through a long chain: the body's facing may be stale there
+            flipped_dist = np.full((m, k), np.inf)  # ... so px from where they would be with the other facing
             for r, j in enumerate(J):
                 P, u = anchor[r]
                 if not lost[j]:
@@ -197,6 +217,13 @@ class KalmanTracker:
                 if not k:
                     continue
                 found = body.anchor(j, seen)
+                if (found is None and mirrored and lost[J[1 - r]] and j not in TORSO and not TORSO & seen.keys()
+                        and body.anchor(J[1 - r], seen) is None):
+                    found = body.anchor(j, seen, max_bones=LONG_BONES)
+                    if found is not None:
+                        far = True
+                        flipped = body.anchor(j, seen, max_bones=LONG_BONES, facing=-body.facing)[2]
+                        flipped_dist[r] = np.linalg.norm(det - flipped, axis=1)
                 if found is not None:  # re-acquisition: a candidate its bones can reach from the nearest
                     point, reach, expected = found  # joint seen (along the bones), near where they put it
                     dist = np.linalg.norm(det - expected, axis=1)
@@ -240,9 +267,10 @@ class KalmanTracker:
                     doubt |= DOUBT["ambiguous identity"]
             if m == 2 and k >= 1 and lost[J[0]] and lost[J[1]]:
                 # both lost: a blob either could be, about as well, is left until they can be told apart
-                with np.errstate(invalid="ignore"):  # inf - inf: not comparable, not ambiguous
-                    close = np.abs(expected_dist[0] - expected_dist[1]) < np.maximum(
-                        0.25 * p.gate_px, TWIN_MARGIN * np.minimum(expected_dist[0], expected_dist[1]))
+                close = _twins_close(expected_dist, 0.25 * p.gate_px)
+                if far:  # through a long chain the facing may be stale: a blob near the middle either way waits
+                    floor = LONG_MARGIN * body.width0 * body.scale
+                    close |= _twins_close(expected_dist, floor) | _twins_close(flipped_dist, floor)
                 both = (cost[0, :k] < _INF) & (cost[1, :k] < _INF) & close
                 if both.any():
                     got = {r: col for r, col in got.items() if not both[col]}
