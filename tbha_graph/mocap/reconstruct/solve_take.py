@@ -315,7 +315,19 @@ def world_frame(P: np.ndarray, nf: np.ndarray, d: float) -> tuple[np.ndarray, np
 def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarray, width: int, height: int,
                       fps: float, p: SolveTakeParams, progress=None, confidence: np.ndarray | None = None) -> dict:
     """The whole solve (see the module docstring) on 2D points ``(n, 16, 2)`` px. Returns a dict with
-    ``joints`` (n, 16, 3) world metres, ``camera`` (:class:`Camera`), ``sides`` (n, 16) int8, ``report``."""
+    ``joints`` (n, 16, 3) world metres, ``camera`` (:class:`Camera`), ``sides`` (n, 16) int8, ``report``.
+
+    BLAS runs on one thread meanwhile: the solver's matrices are small (33 x 33 frame blocks, a band of 99),
+    where threads cost more than they save (measured on the sample, 2 cores: the same wall time, 8.5 s, for
+    half the CPU time, 8.4 s instead of 16.3 s; on a busy machine 2 threads were slower)."""
+    import scipy.linalg  # noqa: F401 - load scipy's BLAS now, so the limit below reaches it too
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _solve_take(points, tracked, lengths, width, height, fps, p, progress, confidence)
+
+
+def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams, progress, confidence) -> dict:
     t0 = time.perf_counter()
     n = points.shape[0]
     centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
