@@ -12,8 +12,8 @@ from tbha_graph.mocap.camera import Camera
 from tbha_graph.mocap.reconstruct.solve_take import (SolveTakeParams, contacts_from_image, globals_vector,
                                                      rest_pair_distances, solve_take_arrays, world_frame)
 from tbha_graph.mocap.reconstruct.take_model import (DEFAULT_POINT_OFFSETS, TakeData, TakeProblem, Weights,
-                                                     bone_directions, levenberg_marquardt, mirror, normal_equations,
-                                                     pack_initial, point_positions)
+                                                     bone_directions, pack_initial, point_positions)
+from tbha_graph.mocap.reconstruct.take_solver import levenberg_marquardt, mirror, normal_equations
 from tbha_graph.mocap.skeleton import PARENTS
 
 ROOT = Path(__file__).resolve().parents[2]

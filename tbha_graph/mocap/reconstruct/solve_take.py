@@ -11,7 +11,7 @@ This node finds, for the whole take at once (model and residuals: :mod:`.take_mo
 * optionally where each tracked point sits on the body and the bone lengths, around their defaults
   (``free_offsets``, ``free_lengths``; off by default: measured no better on the sample).
 
-Method. Levenberg–Marquardt on the whole take's block normal equations (:func:`.take_model.normal_equations`:
+Method. Levenberg–Marquardt on the whole take's block normal equations (:func:`.take_solver.normal_equations`:
 frame blocks banded, globals by a Schur complement, so each step costs time linear in the frames) over
 residuals divided by their standard deviations: robust (soft-L1) reprojection of every tracked point,
 joint-acceleration smoothness (tighter for the torso's joints, ``sigma_acc_torso``: the image fixes the
@@ -29,7 +29,7 @@ twist prior (the pelvis faces where the thorax faces, ``sigma_twist`` about 11 d
 3. **Depth sides.** A limb can lie in front of or behind its parent with the same image. For each group of
    bones (pelvis, thorax, each limb bone, head) and each run of frames where the bone points out of the
    image plane, the mirrored run and the current one are re-optimised together (all windows of a group in
-   one problem) and the mirror kept where it ends cheaper (:func:`.take_model.search_sides_lm`).
+   one problem) and the mirror kept where it ends cheaper (:func:`.take_solver.search_sides_lm`).
 4. **Whole take.** Every frame from the subsample's solution (interpolated), LM with focal and floor free.
    The start with the lowest whole-take cost wins; its depth sides are then re-solved at the other starts'
    focal lengths (``cross_seed``). Another start within 5 % of the best cost at a clearly different focal
@@ -63,8 +63,9 @@ from ..ports import BODY, CAMERA, MOTION, SIDES, TRACKS2D, report_port
 from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS
 from ..body import DEFAULT_ANKLE_HEIGHT, body_lengths, lengths_to_body, tpose_on_floor
 from .take_model import (ANKLES, DEFAULT_POINT_OFFSETS, TORSO_PAIRS, TakeData, TakeProblem, Weights,
-                         bone_directions, fronts, pack_initial, point_positions, unit, levenberg_marquardt)
-from .take_model import search_sides_lm as search_sides
+                         bone_directions, fronts, pack_initial, point_positions, unit)
+from .take_solver import levenberg_marquardt
+from .take_solver import search_sides_lm as search_sides
 from .temporal_ray_sphere import TemporalRaySphereParams, solve_temporal
 
 

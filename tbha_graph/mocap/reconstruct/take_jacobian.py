@@ -10,7 +10,7 @@ Two factors, both per frame and vectorised over frames:
   :meth:`.take_model.TakeProblem.frame_terms` (unit vectors, cross products, the pinhole projection, the
   soft-L1 rescaling) (:func:`residual_jacobian`).
 
-Their product is the frame block of the Jacobian that :func:`.take_model.normal_equations` needs; a test
+Their product is the frame block of the Jacobian that :func:`.take_solver.normal_equations` needs; a test
 checks it against finite differences. Camera frame, metres; residuals in units of their sigmas.
 """
 from __future__ import annotations

@@ -1,0 +1,344 @@
+"""Solving the whole-take model (:mod:`.take_model`): Gauss–Newton normal equations in block form with the
+analytic Jacobian (:mod:`.take_jacobian`), their banded solve, Levenberg–Marquardt, and the discrete search
+over depth sides (a limb in front of or behind its parent gives the same image).
+
+Everything in the camera frame (metres), vectorised over frames; shapes in each docstring.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..skeleton import N_JOINTS, PARENTS
+from .take_jacobian import global_jacobian, joint_jacobian, residual_jacobian
+from .take_model import (ANKLES, J, N_FRAME_RES, PER_FRAME, TakeData, TakeProblem, bone_directions, pack_initial,
+                         unit)
+
+
+def lower_band(diag: np.ndarray, up1: np.ndarray, up2: np.ndarray) -> np.ndarray:
+    """LAPACK's lower band storage ``(3 m, n m)`` (``ab[i - j, j] = A[i, j]``, ``3 m - 1`` subdiagonals) of the
+    symmetric block-banded matrix with diagonal blocks ``diag`` and upper blocks ``up1`` (t, t+1), ``up2``
+    (t, t+2), each ``(n, m, m)``. Each block column ``[diag; up1ᵀ; up2ᵀ]`` is read along its diagonals by a
+    strided view (no index arrays), then copied once."""
+    from numpy.lib.stride_tricks import as_strided
+
+    n, m, _ = diag.shape
+    K = np.zeros((n, 4 * m, m))  # block column t: rows of blocks (t, t), (t+1, t), (t+2, t), then zeros
+    K[:, :m] = diag
+    K[:-1, m:2 * m] = np.swapaxes(up1[:-1], 1, 2)
+    K[:-2, 2 * m:3 * m] = np.swapaxes(up2[:-2], 1, 2)
+    st = K.strides
+    skew = as_strided(K, shape=(n, 3 * m, m), strides=(st[0], st[1], st[1] + st[2]), writeable=False)  # [t, d, c] = K[t, c + d, c]
+    return np.asfortranarray(skew.transpose(1, 0, 2).reshape(3 * m, n * m))
+
+
+@dataclass
+class Normal:
+    """Gauss–Newton normal equations ``A dx = -b`` of a take in block form: frame blocks ``diag`` ``(n, 33, 33)``,
+    upper off-diagonal blocks ``up1`` (frame t with t+1) and ``up2`` (t with t+2) ``(n, 33, 33)``, frame
+    gradient ``bf`` ``(n, 33)``; globals ``D`` ``(G, G)``, ``C`` ``(n, 33, G)`` (frames x globals), ``bg`` ``(G,)``."""
+
+    diag: np.ndarray
+    up1: np.ndarray
+    up2: np.ndarray
+    bf: np.ndarray
+    D: np.ndarray
+    C: np.ndarray
+    bg: np.ndarray
+
+    def solve(self, lam: float) -> np.ndarray:
+        """``dx`` (globals first, then frames) of ``(A + lam diag(A)) dx = -b``: banded Cholesky of the frame
+        block (LAPACK ``dpbtrf``/``dpbtrs``: the blocks (t, t±1), (t, t±2) are a band of ``3 m - 1``
+        subdiagonals, no fill-in outside it; :func:`lower_band`), Schur complement for the globals. Linear in the number of
+        frames. Raises ``LinAlgError`` when the damped matrix is not positive definite."""
+        from scipy.linalg import lapack  # imported where it is used: not paid by a cached run
+
+        n, m = self.bf.shape
+        N = n * m
+        diag = self.diag.copy()
+        k = np.arange(m)
+        diag[:, k, k] += lam * diag[:, k, k] + 1e-9
+        chol, info = lapack.dpbtrf(lower_band(diag, self.up1, self.up2), lower=1, overwrite_ab=1)
+        if info != 0:
+            raise np.linalg.LinAlgError(f"frame matrix not positive definite (dpbtrf info {info})")
+
+        def back(rhs: np.ndarray) -> np.ndarray:  # A^-1 rhs from the factor
+            return lapack.dpbtrs(chol, rhs, lower=1)[0]
+
+        bf = self.bf.reshape(N)
+        G = self.D.shape[0]
+        if G == 0:
+            return -back(bf)
+        C = self.C.reshape(N, G)
+        Y = back(np.ascontiguousarray(np.concatenate([C, bf[:, None]], axis=1)))
+        D = self.D + np.diag(lam * np.diag(self.D) + 1e-12)
+        S = D - C.T @ Y[:, :G]
+        dgl = np.linalg.solve(S, self.bg - C.T @ Y[:, G])
+        dfr = Y[:, G] - Y[:, :G] @ dgl
+        if not (np.isfinite(dgl).all() and np.isfinite(dfr).all()):
+            raise np.linalg.LinAlgError("singular normal equations")
+        return -np.concatenate([dgl, dfr])
+
+    def globals_covariance(self) -> np.ndarray:
+        """Covariance ``(G, G)`` of the globals (residuals in units of their sigmas): the inverse of the Schur
+        complement of the frame block."""
+        G = self.D.shape[0]
+        if G == 0:
+            return np.zeros((0, 0))
+        zero = Normal(self.diag, self.up1, self.up2, np.zeros_like(self.bf), self.D, self.C, np.zeros(G))
+        n, m = self.bf.shape
+        cols = []
+        for k in range(G):  # solve with unit gradients on each global: the columns of the inverse
+            zero.bg = np.zeros(G)
+            zero.bg[k] = -1.0
+            cols.append(zero.solve(0.0)[:G])
+        return np.array(cols).T
+
+
+def _gram(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Per-frame ``Aᵀ B``: ``(t, r, i)``, ``(t, r, j)`` -> ``(t, i, j)`` (batched BLAS; ``einsum`` is ~20x slower here)."""
+    return np.matmul(np.swapaxes(A, 1, 2), B)
+
+
+def _gram_vec(A: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Per-frame ``Aᵀ v``: ``(t, r, i)``, ``(t, r)`` -> ``(t, i)``."""
+    return np.matmul(np.swapaxes(A, 1, 2), v[..., None])[..., 0]
+
+
+def normal_equations(prob: "TakeProblem", x: np.ndarray) -> tuple[Normal, float]:
+    """The Gauss–Newton normal equations of ``prob`` at ``x`` (blocks, see :class:`Normal`) and the cost.
+
+    Jacobians are analytic (:mod:`.take_jacobian`): the frame unknowns' per frame (a frame's own residuals depend
+    on its own unknowns only), accelerations and slides by the chain rule through the joints' differences, and
+    the globals' for the whole residual vector."""
+    n, G, F, m = prob.n, prob.n_glob, N_FRAME_RES, PER_FRAME
+    g = prob.globals_of(x)
+    fr = prob.frames_of(x)
+    L = prob.lengths_of(g)
+    P0 = prob.joints_from_frames(fr, L)
+    R0 = prob.frame_terms(P0, g)
+    nf = prob.floor(g)[0]
+    dP = joint_jacobian(prob, fr, L).reshape(n, N_JOINTS * 3, m)
+    parts: dict = {}
+    dRdP = residual_jacobian(prob, P0, g, parts).reshape(n, F, N_JOINTS * 3)
+    dR = dRdP @ dP  # (n, F, m)
+    diag = _gram(dR, dR)
+    bf = _gram_vec(dR, R0)
+    up1 = np.zeros((n, m, m))
+    up2 = np.zeros((n, m, m))
+    acc, slide = prob.coupled_terms(P0, nf)
+    if n > 2:
+        s = prob.acc_scale
+        dPs = dP * s[None, :, None]
+        c = (1.0, -2.0, 1.0)
+        mask = prob.d.acc_mask()[:, None, None]
+        for k in range(3):
+            bf[k:n - 2 + k] += c[k] * _gram_vec(dPs[k:n - 2 + k], acc)
+            for l in range(k, 3):
+                blk = mask * c[k] * c[l] * _gram(dPs[k:n - 2 + k], dPs[l:n - 2 + l])
+                if l == k:
+                    diag[k:n - 2 + k] += blk
+                elif l - k == 1:
+                    up1[k:n - 2 + k] += blk
+                else:
+                    up2[k:n - 2 + k] += blk
+    step, both = prob.slide_vectors(P0, nf)
+    norm = np.linalg.norm(step, axis=-1, keepdims=True)
+    u = np.where(both[..., None], step / np.maximum(norm, 1e-9), 0.0)
+    u = u - (u @ nf)[..., None] * nf
+    dPa = dP.reshape(n, N_JOINTS, 3, m)[:, ANKLES]
+    d_now = np.einsum("tac,tacp->tap", u, dPa) / prob.w.sigma_slide  # (n, 2, m) on frame t
+    d_prev = np.zeros_like(d_now)
+    d_prev[1:] = -np.einsum("tac,tacp->tap", u[1:], dPa[:-1]) / prob.w.sigma_slide  # row t, on frame t-1
+    diag += _gram(d_now, d_now)
+    bf += _gram_vec(d_now, slide)
+    if n > 1:
+        diag[:-1] += _gram(d_prev[1:], d_prev[1:])
+        up1[:-1] += _gram(d_prev[1:], d_now[1:])
+        bf[:-1] += _gram_vec(d_prev[1:], slide[1:])
+    r_full = np.concatenate([R0.ravel(), acc.ravel(), slide.ravel(), prob.global_terms(g)])
+    cost = 0.5 * float(r_full @ r_full)
+    D = np.zeros((G, G))
+    C = np.zeros((n, m, G))
+    bg = np.zeros(G)
+    if G:
+        Jg = global_jacobian(prob, P0, g, dRdP, parts)
+        D = Jg.T @ Jg
+        bg = Jg.T @ r_full
+        Jf = Jg[: n * F].reshape(n, F, G)
+        C = _gram(dR, Jf)
+        if n > 2:  # accelerations depend on globals too when bone lengths are free
+            Ja = Jg[n * F: n * F + (n - 2) * N_JOINTS * 3].reshape(n - 2, N_JOINTS * 3, G)
+            s_acc = prob.acc_scale[None, :, None]
+            am = prob.d.acc_mask()[:, None, None]
+            for k, ck in enumerate((1.0, -2.0, 1.0)):
+                C[k:n - 2 + k] += ck * _gram(dP[k:n - 2 + k] * s_acc, Ja * am)
+        base = n * F + max(n - 2, 0) * N_JOINTS * 3
+        Js = Jg[base: base + 2 * n].reshape(n, 2, G)
+        C += _gram(d_now, Js)
+        if n > 1:
+            C[:-1] += _gram(d_prev[1:], Js[1:])
+    return Normal(diag, up1, up2, bf, D, C, bg), cost
+
+
+def levenberg_marquardt(prob: "TakeProblem", x0: np.ndarray, max_iterations: int = 30, tol: float = 1e-5):
+    """Minimise ``0.5 |prob.residuals(x)|²`` by Levenberg–Marquardt on the block normal equations
+    (:func:`normal_equations`, :meth:`Normal.solve`), re-centring the tangent references after every
+    accepted step. Returns ``(x, cost, iterations, normal equations at the last linearisation)``."""
+    from scipy.linalg import LinAlgError
+
+    x = prob.recentre(x0)
+    lam = 1e-3
+    it = 0
+    rel = 1.0
+    ne = None
+    for it in range(1, max_iterations + 1):
+        ne, cost = normal_equations(prob, x)
+        improved = False
+        while lam < 1e10:
+            try:
+                dx = ne.solve(lam)
+            except (LinAlgError, np.linalg.LinAlgError):
+                lam *= 10
+                continue
+            xn = x + dx
+            rn = prob.residuals(xn)
+            cn = 0.5 * float(rn @ rn)
+            if np.isfinite(cn) and cn < cost:
+                rel = (cost - cn) / max(cost, 1e-12)
+                x, cost = prob.recentre(xn), cn
+                lam = max(lam / 3.0, 1e-7)
+                improved = True
+                break
+            lam *= 4.0
+        if not improved or rel < tol:
+            break
+    r = prob.residuals(x)
+    return x, 0.5 * float(r @ r), it, ne
+
+
+def joints_cost(prob: TakeProblem, P: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """Per-frame cost ``(n,)`` of joints ``P`` ``(n, 16, 3)`` (half squared residuals; accelerations and slides
+    charged to the frame they end on)."""
+    F = prob.frame_terms(P, g)
+    acc, slide = prob.coupled_terms(P, prob.floor(g)[0])
+    c = 0.5 * np.sum(F ** 2, axis=1) + 0.5 * np.sum(slide ** 2, axis=1)
+    c[2:] += 0.5 * np.sum(acc ** 2, axis=1)
+    return c
+
+
+def reexpand(P: np.ndarray, old: np.ndarray, frames: np.ndarray, joints: list[int], lengths: np.ndarray) -> None:
+    """Re-place ``joints`` (parents first) on ``frames`` of ``P`` (in place): each stays on its own camera ray
+    (the ray through its position in ``old``), at its bone length from its (possibly moved) parent, on the
+    same depth side of the parent as in ``old``."""
+    for j in joints:
+        a = PARENTS[j]
+        u = unit(old[frames, j])
+        side = np.sign(np.sum((old[frames, j] - old[frames, a]) * u, axis=-1))
+        c = P[frames, a]
+        uc = np.sum(u * c, axis=-1)
+        D = lengths[j] ** 2 - (np.sum(c * c, axis=-1) - uc ** 2)
+        P[frames, j] = (uc + side * np.sqrt(np.maximum(D, 0.0)))[:, None] * u
+
+
+def descendants(j: int) -> list[int]:
+    """Joints hanging below ``j`` (parents first)."""
+    out, stack = [], [j]
+    while stack:
+        k = stack.pop(0)
+        kids = [int(c) for c in np.flatnonzero(PARENTS == k)]
+        out.extend(kids)
+        stack.extend(kids)
+    return out
+
+
+def flip_segments(P: np.ndarray, j: int, min_tilt: float = 0.12) -> list[np.ndarray]:
+    """Frame runs ``[frames, ...]`` where bone ``j`` (parent -> j) points clearly out of the image plane
+    (``|cos|`` between the bone and the viewing ray above ``min_tilt``): the segments whose depth side can be
+    flipped as a whole (between runs the bone crosses the image plane, where a flip costs nothing)."""
+    u = unit(P[:, j])
+    cos = np.sum(unit(P[:, j] - P[:, PARENTS[j]]) * u, axis=-1)
+    out = np.abs(cos) > min_tilt
+    segs, start = [], None
+    for k, o in enumerate(np.append(out, False)):
+        if o and start is None:
+            start = k
+        elif not o and start is not None:
+            segs.append(np.arange(start, k))
+            start = None
+    return segs
+
+
+#: Bones whose depth side is searched together: both hip joints (the pelvis turned one way or the mirror way),
+#: both shoulders (the thorax likewise), then each limb bone and the head on its own.
+SIDE_GROUPS: tuple[tuple[int, ...], ...] = (
+    (J["left_hip"], J["right_hip"]), (J["left_shoulder"], J["right_shoulder"]),
+    (J["left_knee"],), (J["right_knee"],), (J["left_ankle"],), (J["right_ankle"],),
+    (J["left_elbow"],), (J["right_elbow"],), (J["left_wrist"],), (J["right_wrist"],),
+    (J["head"],),
+)
+
+
+def mirror(P: np.ndarray, frames: np.ndarray, group: tuple[int, ...], lengths: np.ndarray) -> np.ndarray:
+    """``P`` with each joint of ``group`` moved to the other root of its ray-sphere on ``frames`` (the other
+    depth side of its parent, same pixel) and the joints below it re-placed on their own sides."""
+    trial = P.copy()
+    for j in group:
+        u = unit(P[frames, j])
+        c = P[frames, PARENTS[j]]
+        t_other = 2.0 * np.sum(u * c, axis=-1) - np.linalg.norm(P[frames, j], axis=-1)
+        trial[frames, j] = t_other[:, None] * u
+    below = [k for j in group for k in descendants(j)]
+    reexpand(trial, P, frames, below, lengths)
+    return trial
+
+
+def search_sides_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, iterations: int = 3, margin: int = 2,
+                    groups: tuple[tuple[int, ...], ...] = SIDE_GROUPS) -> tuple[np.ndarray, int]:
+    """Discrete search over depth sides with local re-optimisation: for each group of bones
+    (:data:`SIDE_GROUPS`) and each out-of-plane run of frames (:func:`flip_segments`) the run is mirrored
+    (:func:`mirror`); the current and the mirrored run (with ``margin`` frames either side) are re-optimised
+    for ``iterations`` steps with the globals held — all windows of a group at once, as independent segments
+    of one problem (``TakeData.breaks``) — and each mirror is kept when it ends cheaper than the current run.
+    Returns the joints and the number of mirrors kept."""
+    P = P.copy()
+    nf = prob.floor(g)[0]
+    L = prob.lengths_of(g)
+    d = prob.d
+    n = P.shape[0]
+    kept = 0
+    for group in groups:
+        wins = []
+        for seg in flip_segments(P, group[0]):
+            if len(seg) < 2:
+                continue
+            wins.append((max(seg[0] - margin, 0), min(seg[-1] + 1 + margin, n), seg))
+        if not wins:
+            continue
+        parts, idx, breaks = [], [], []
+        for lo, hi, seg in wins:
+            trial = mirror(P, seg, group, L)
+            for Q in (P, trial):
+                parts.append(Q[lo:hi])
+                idx.append(np.arange(lo, hi))
+                breaks.append(np.r_[True, np.zeros(hi - lo - 1, dtype=bool)])
+        rows = np.concatenate(idx)
+        Pst = np.concatenate(parts)
+        data = TakeData(d.points[rows], d.weight[rows], d.lengths, d.centre, d.fps, d.ankle_height, d.contact[rows],
+                        d.rest_pairs, breaks=np.concatenate(breaks))
+        ref = bone_directions(Pst)
+        wp = TakeProblem(data, ref, nf, prob.w, prob.offsets0, fixed_globals=g, free_offsets=prob.layout.free_offsets,
+                         free_lengths=prob.layout.free_lengths)
+        x, _, _, _ = levenberg_marquardt(wp, pack_initial(Pst, ref), iterations)
+        Pout = wp.joints_from_frames(wp.frames_of(x), L)
+        cost = joints_cost(wp, Pout, g)
+        start = 0
+        for lo, hi, seg in wins:
+            m = hi - lo
+            c_cur, c_new = cost[start:start + m].sum(), cost[start + m:start + 2 * m].sum()
+            if c_new < c_cur:
+                P[lo:hi] = Pout[start + m:start + 2 * m]
+                kept += 1
+            start += 2 * m
+    return P, kept
