@@ -202,3 +202,19 @@ def test_twist_prior_measures_the_pelvis_turned_from_the_thorax(truth):
     got = np.linalg.norm(prob.frame_terms(Q, g)[:, -3:], axis=1)
     assert np.allclose(got, np.linalg.norm(pe2 - th2, axis=1) / 0.2)
     assert np.all(got > 2 * np.sin(a / 2) / 0.2 * 0.8)  # the turn shows (the spine is not quite vertical)
+
+
+def test_confidence_power_without_confidence_is_a_warning(truth):
+    """A weight on the tracks' confidence asked of tracks that carry none reaches the user as a warning (not
+    only the log), and the solve still runs."""
+    from tbha_graph.core.node import Context
+    from tbha_graph.mocap.reconstruct.solve_take import solve_take as spec  # the node's NodeSpec
+
+    P, uv, centre, L = synthetic(truth, 30, start=0)
+    tracks = {"points": uv, "tracked": np.ones(uv.shape[:2], bool), "width": np.asarray(640), "height": np.asarray(480),
+              "fps": np.asarray(float(truth["fps"]))}
+    for power, warned in ((1.0, True), (0.0, False)):
+        ctx = Context(spec.type, spec.params.model_validate({"focal_px": 700.0, "confidence_power": power}))
+        out = spec.fn(ctx, tracks=dict(tracks), body=None)
+        assert out["motion"]["joints"].shape == (30, 16, 3)
+        assert any("carry no confidence" in w for w in ctx.warnings) == warned

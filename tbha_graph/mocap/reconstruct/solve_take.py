@@ -477,15 +477,15 @@ def solve_take(ctx, tracks, body):
         ctx.log("point offsets from the tracks (the detector's calibrated offsets)")
     confidence = tracks.get("confidence") if isinstance(tracks, dict) else None
     if p.confidence_power > 0 and confidence is None:
-        ctx.log("confidence_power is set but the tracks carry no confidence: every tracked point weighs the same")
+        ctx.warn("confidence_power is set but the tracks carry no confidence: every tracked point weighs the same "
+                 "(detectors such as detect.mediapipe_pose give one; suit trackers do not)")
     out = solve_take_arrays(tr.points, tr.tracked, lengths, tr.width, tr.height, float(tr.fps), p,
                             progress=lambda k, total: ctx.log(f"stage {k}/{total}"), confidence=confidence)
     rep = out["report"]
     ctx.log(f"focal {rep['focal_px']:.0f} px (± {rep['focal_sd_pct']:.1f} %), camera {rep['camera_height_m']:.2f} m high, "
             f"{rep['camera_distance_m']:.2f} m away, tilt {rep['camera_tilt_deg']:.1f}°; {rep['solve_seconds']:.1f} s")
     for w in rep["warnings"]:
-        warn = getattr(ctx, "warn", None)  # the framework's warning channel where it has one
-        (warn if callable(warn) else ctx.log)(w)
+        ctx.warn(w)
     motion = {"joints": out["joints"], "fps": np.asarray(tr.fps, dtype=np.float64), "tracked": tr.tracked.copy(),
               "joint_names": np.array(JOINT_NAMES)}
     return {"motion": motion, "camera": out["camera"].to_model(), "report": out["report"],
