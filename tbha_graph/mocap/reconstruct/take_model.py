@@ -206,7 +206,7 @@ N_FRAME_RES = N_JOINTS * 2 + len(TORSO_PAIRS) + len(HINGES) + 4 + 6
 
 
 class TakeProblem:
-    """Residuals and their Jacobian for one take (or window).
+    """Residuals of one take (or window); their Jacobian is :mod:`.take_jacobian`'s, the solve :mod:`.take_solver`'s.
 
     ``x`` = globals (``n_glob`` values; none when ``fixed_globals`` is given) then ``n`` frames of
     :data:`PER_FRAME` values. Bone directions are tangent updates around ``ref`` ``(n, 15, 3)`` and the floor

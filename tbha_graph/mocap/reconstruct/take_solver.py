@@ -50,8 +50,8 @@ class Normal:
     def solve(self, lam: float) -> np.ndarray:
         """``dx`` (globals first, then frames) of ``(A + lam diag(A)) dx = -b``: banded Cholesky of the frame
         block (LAPACK ``dpbtrf``/``dpbtrs``: the blocks (t, t±1), (t, t±2) are a band of ``3 m - 1``
-        subdiagonals, no fill-in outside it; :func:`lower_band`), Schur complement for the globals. Linear in the number of
-        frames. Raises ``LinAlgError`` when the damped matrix is not positive definite."""
+        subdiagonals, no fill-in outside it; :func:`lower_band`), Schur complement for the globals. Linear in
+        the number of frames. Raises ``LinAlgError`` when the damped matrix is not positive definite."""
         from scipy.linalg import lapack  # imported where it is used: not paid by a cached run
 
         n, m = self.bf.shape
