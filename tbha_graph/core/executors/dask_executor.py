@@ -67,24 +67,27 @@ def _run_attempt(client, graph: Graph, order: list[str], cache: Cache, reporter:
     from distributed import as_completed
 
     ups = {nid: sorted({src for src, _ in graph.nodes[nid].inputs.values()}) for nid in order}
+    waiting = {nid: len(ups[nid]) for nid in order}  # upstream nodes not yet done
+    below: dict[str, list[str]] = {nid: [] for nid in order}
+    for nid in order:
+        for u in ups[nid]:
+            below[u].append(nid)
     results: dict[str, NodeResult] = {}
     corrupt: dict[str, NodeResult] = {}
-    submitted: set[str] = set()
     by_key: dict[str, str] = {}
     pending = as_completed(loop=client.loop)
     futures = []
 
-    def submit_ready():
-        for nid in order:
-            if nid not in submitted and all(u in results for u in ups[nid]):
-                fut = client.submit(_task, nid, graph, str(cache.root), *[results[u] for u in ups[nid]],
-                                    key=f"tbha-{nid}-{id(graph)}-{attempt}", pure=False)
-                submitted.add(nid)
-                by_key[fut.key] = nid
-                futures.append(fut)
-                pending.add(fut)
+    def submit(nid: str) -> None:
+        fut = client.submit(_task, nid, graph, str(cache.root), *[results[u] for u in ups[nid]],
+                            key=f"tbha-{nid}-{id(graph)}-{attempt}", pure=False)
+        by_key[fut.key] = nid
+        futures.append(fut)
+        pending.add(fut)
 
-    submit_ready()
+    for nid in order:
+        if not waiting[nid]:
+            submit(nid)
     for fut in pending:
         nid = by_key[fut.key]
         try:
@@ -101,7 +104,10 @@ def _run_attempt(client, graph: Graph, order: list[str], cache: Cache, reporter:
             reporter.warn(f"{nid}: {w}")
         reporter.node_done(nid, graph.nodes[nid].spec.type, res.status, res.seconds)
         results[nid] = res
-        submit_ready()
+        for child in below[nid]:
+            waiting[child] -= 1
+            if not waiting[child]:
+                submit(child)
     return results, corrupt
 
 
