@@ -54,7 +54,10 @@ def problem(truth, P, uv, centre, L, weights: Weights, free_offsets=False, focal
 
 @pytest.mark.parametrize("free_offsets,free_lengths,split", [(False, False, False), (True, False, False),
                                                              (False, True, False), (False, False, True)])
-def test_block_normal_equations_equal_the_dense_ones(truth, free_offsets, free_lengths, split):
+def test_block_normal_equations_equal_the_dense_ones(truth, free_offsets, free_lengths, split, monkeypatch):
+    from tbha_graph.mocap.reconstruct import take_solver
+
+    monkeypatch.setattr(take_solver, "JACOBIAN_CHUNK", 4)  # the frame Jacobian in chunks of 4, 4 and 1 frames
     P, uv, centre, L = synthetic(truth, 9)
     prob, d = problem(truth, P, uv + 0.7, centre, L, Weights(), free_offsets=free_offsets, free_lengths=free_lengths)
     if split:  # two independent windows in one problem (the side search's batches): nothing links frame 3 to 4

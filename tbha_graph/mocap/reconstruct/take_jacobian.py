@@ -81,17 +81,18 @@ def joint_jacobian(prob: TakeProblem, fr: np.ndarray, L: np.ndarray) -> np.ndarr
     return out
 
 
-def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: dict | None = None) -> np.ndarray:
+def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: dict | None = None,
+                      rows: slice = slice(None)) -> np.ndarray:
     """``dR/dP`` ``(n, N_FRAME_RES, 16, 3)`` of :meth:`.take_model.TakeProblem.frame_terms` at joints ``P``
-    ``(n, 16, 3)`` under globals ``g``; ``parts`` (a dict, if given) receives the reprojection's pieces that
-    :func:`global_jacobian` reuses."""
+    ``(n, 16, 3)`` (the take's frames ``rows``: a chunk of it) under globals ``g``; ``parts`` (a dict, if
+    given) receives the reprojection's pieces that :func:`global_jacobian` reuses."""
     w, d = prob.w, prob.d
     n = P.shape[0]
     out = np.zeros((n, N_FRAME_RES, N_JOINTS, 3))
     thorax, d_thorax = front_jacobian(P, THORAX_JOINTS)
     pelvis, d_pelvis = front_jacobian(P, PELVIS_JOINTS)
     row = 2 * N_JOINTS
-    rep = _reprojection(prob, P, g, thorax, d_thorax, pelvis, d_pelvis, out)
+    rep = _reprojection(prob, P, g, thorax, d_thorax, pelvis, d_pelvis, out, rows)
     if parts is not None:
         parts.update(rep)
     # torso distances
@@ -120,7 +121,7 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
     h = P[:, ANKLES] @ nf + dfl - d.ankle_height
     for k, a in enumerate(ANKLES):
         out[:, row + k, a] = (h[:, k] < 0.0)[:, None] * nf / w.sigma_floor
-        out[:, row + 2 + k, a] = (d.contact[:, k] & (h[:, k] > w.contact_band))[:, None] * nf / w.sigma_floor
+        out[:, row + 2 + k, a] = (d.contact[rows, k] & (h[:, k] > w.contact_band))[:, None] * nf / w.sigma_floor
     row += 4
     # head along the neck
     _, Uh = unit_jacobian(P[:, J["head"]] - P[:, J["neck"]])
@@ -138,7 +139,7 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
     return out
 
 
-def _reprojection(prob: TakeProblem, P, g, thorax, d_thorax, pelvis, d_pelvis, out: np.ndarray) -> dict:
+def _reprojection(prob: TakeProblem, P, g, thorax, d_thorax, pelvis, d_pelvis, out: np.ndarray, rows: slice) -> dict:
     """Add ``d rep / dP`` (rows ``0..31``: point j's u, v) to ``out`` ``(n, F, 16, 3)``; returns what the globals'
     derivatives reuse: ``Gq`` (d rep / d point, ``(n, 16, 2, 3)``), the points' ``axis`` and ``out`` directions
     ``(n, 16, 3)`` and ``dlogf`` (d rep / d log f, ``(n, 16, 2)``)."""
@@ -167,8 +168,8 @@ def _reprojection(prob: TakeProblem, P, g, thorax, d_thorax, pelvis, d_pelvis, o
     # d rep / dQ: soft-L1 of (f Q_xy / z + c - obs) * weight / sigma
     zc = Q[..., 2]
     z = np.maximum(zc, 1e-3)
-    s = d.weight / w.sigma_px  # (n, 16)
-    e = ((f * Q[..., :2] / z[..., None] + d.centre) - d.points) * s[..., None]
+    s = d.weight[rows] / w.sigma_px  # (n, 16)
+    e = ((f * Q[..., :2] / z[..., None] + d.centre) - d.points[rows]) * s[..., None]
     c = w.robust_scale
     root = np.sqrt(1.0 + (e / c) ** 2)
     rho = c * np.sqrt(2.0 * (root - 1.0))
@@ -197,11 +198,21 @@ def _reprojection(prob: TakeProblem, P, g, thorax, d_thorax, pelvis, d_pelvis, o
     return {"Gq": Gq, "axis": axis, "out": outv, "dlogf": drho * s[..., None] * (f * Q[..., :2] / z[..., None])}
 
 
-def global_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, dRdP: np.ndarray, parts: dict) -> np.ndarray:
+def length_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """``dP / d log L`` ``(n, 48, 15)``: a bone made longer moves every joint below it along the bone."""
+    n = P.shape[0]
+    dirs = unit(P[:, 1:] - P[:, PARENTS[1:]])  # (n, 15, 3)
+    L = prob.lengths_of(g)
+    return (SUBTREE[None, :, None, :] * (L[1:] * np.swapaxes(dirs, 1, 2))[:, None]).reshape(n, N_JOINTS * 3, N_BONES)
+
+
+def global_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: dict,
+                    frame_by_lengths: np.ndarray | None = None) -> np.ndarray:
     """Jacobian ``(n_residuals, G)`` of the whole residual vector (:meth:`.take_model.TakeProblem.residuals`
     order: frame blocks, accelerations, slides, global priors) by the globals: ``log f``, the floor's tangent
     update (2) and offset, the point offsets (32, when free) and the bone-length log-updates (15, when free).
-    ``P`` ``(n, 16, 3)`` joints, ``dRdP`` ``(n, F, 48)`` and ``parts`` from :func:`residual_jacobian`."""
+    ``P`` ``(n, 16, 3)`` joints, ``parts`` from :func:`residual_jacobian`; with free lengths
+    ``frame_by_lengths`` ``(n, F, 15)`` = ``dR/dP`` times :func:`length_jacobian` (the caller has ``dR/dP``)."""
     w, d, lay = prob.w, prob.d, prob.layout
     n, F, G = P.shape[0], N_FRAME_RES, prob.n_glob
     n_acc = max(n - 2, 0)
@@ -239,11 +250,8 @@ def global_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, dRdP: np.nd
         Jp.append(np.eye(2 * N_JOINTS) / w.sigma_offset)
         k += 2 * N_JOINTS
     if lay.free_lengths:  # bone b longer: every joint below it moves along the bone
-        dirs = unit(P[:, 1:] - P[:, PARENTS[1:]])  # (n, 15, 3)
-        L = prob.lengths_of(g)
-        dPdL = SUBTREE[None, :, None, :] * (L[1:] * np.swapaxes(dirs, 1, 2))[:, None]  # (n, 16, 3, 15)
-        dPdL = dPdL.reshape(n, N_JOINTS * 3, N_BONES)
-        Jf[..., k:k + N_BONES] = dRdP @ dPdL
+        dPdL = length_jacobian(prob, P, g)
+        Jf[..., k:k + N_BONES] = frame_by_lengths
         if n_acc:
             second = dPdL[2:] - 2.0 * dPdL[1:-1] + dPdL[:-2]
             Ja[..., k:k + N_BONES] = second * prob.acc_scale[None, :, None] * d.acc_mask()[:, None, None]

@@ -11,16 +11,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..skeleton import N_JOINTS, PARENTS
-from .take_jacobian import global_jacobian, joint_jacobian, residual_jacobian
-from .take_model import (ANKLES, J, N_FRAME_RES, PER_FRAME, TakeData, TakeProblem, bone_directions, pack_initial,
-                         unit)
+from .take_jacobian import global_jacobian, joint_jacobian, length_jacobian, residual_jacobian
+from .take_model import (ANKLES, J, N_BONES, N_FRAME_RES, PER_FRAME, TakeData, TakeProblem, bone_directions,
+                         pack_initial, unit)
+
+#: Frames per chunk of the residuals-by-joints Jacobian in :func:`normal_equations` (bounds its memory)
+JACOBIAN_CHUNK = 256
 
 
 def lower_band(diag: np.ndarray, up1: np.ndarray, up2: np.ndarray) -> np.ndarray:
     """LAPACK's lower band storage ``(3 m, n m)`` (``ab[i - j, j] = A[i, j]``, ``3 m - 1`` subdiagonals) of the
     symmetric block-banded matrix with diagonal blocks ``diag`` and upper blocks ``up1`` (t, t+1), ``up2``
     (t, t+2), each ``(n, m, m)``. Each block column ``[diag; up1ᵀ; up2ᵀ]`` is read along its diagonals by a
-    strided view (no index arrays), then copied once."""
+    strided view (no index arrays), copied once into Fortran order."""
     from numpy.lib.stride_tricks import as_strided
 
     n, m, _ = diag.shape
@@ -30,7 +33,9 @@ def lower_band(diag: np.ndarray, up1: np.ndarray, up2: np.ndarray) -> np.ndarray
     K[:-2, 2 * m:3 * m] = np.swapaxes(up2[:-2], 1, 2)
     st = K.strides
     skew = as_strided(K, shape=(n, 3 * m, m), strides=(st[0], st[1], st[1] + st[2]), writeable=False)  # [t, d, c] = K[t, c + d, c]
-    return np.asfortranarray(skew.transpose(1, 0, 2).reshape(3 * m, n * m))
+    cols = np.empty((n, m, 3 * m))  # [t, c, d]: the band's column t m + c, so C order here is Fortran order there
+    cols[...] = skew.transpose(0, 2, 1)
+    return cols.reshape(n * m, 3 * m).T
 
 
 @dataclass
@@ -120,9 +125,19 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray) -> tuple[Normal, float]
     R0 = prob.frame_terms(P0, g)
     nf = prob.floor(g)[0]
     dP = joint_jacobian(prob, fr, L).reshape(n, N_JOINTS * 3, m)
-    parts: dict = {}
-    dRdP = residual_jacobian(prob, P0, g, parts).reshape(n, F, N_JOINTS * 3)
-    dR = dRdP @ dP  # (n, F, m)
+    dR = np.empty((n, F, m))
+    pieces: list[dict] = []
+    by_lengths = np.empty((n, F, N_BONES)) if prob.layout.free_lengths and G else None
+    dPdL = length_jacobian(prob, P0, g) if by_lengths is not None else None
+    for a in range(0, n, JACOBIAN_CHUNK):  # frames in chunks: the residuals-by-joints Jacobian is the largest array
+        rows = slice(a, min(a + JACOBIAN_CHUNK, n))
+        part: dict = {}
+        dRdP = residual_jacobian(prob, P0[rows], g, part, rows).reshape(-1, F, N_JOINTS * 3)
+        dR[rows] = dRdP @ dP[rows]
+        if by_lengths is not None:
+            by_lengths[rows] = dRdP @ dPdL[rows]
+        pieces.append(part)
+    parts = {k: np.concatenate([pc[k] for pc in pieces]) for k in pieces[0]} if pieces else {}
     diag = _gram(dR, dR)
     bf = _gram_vec(dR, R0)
     up1 = np.zeros((n, m, m))
@@ -163,7 +178,7 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray) -> tuple[Normal, float]
     C = np.zeros((n, m, G))
     bg = np.zeros(G)
     if G:
-        Jg = global_jacobian(prob, P0, g, dRdP, parts)
+        Jg = global_jacobian(prob, P0, g, parts, by_lengths)
         D = Jg.T @ Jg
         bg = Jg.T @ r_full
         Jf = Jg[: n * F].reshape(n, F, G)
@@ -194,6 +209,7 @@ def levenberg_marquardt(prob: "TakeProblem", x0: np.ndarray, max_iterations: int
     rel = 1.0
     ne = None
     for it in range(1, max_iterations + 1):
+        ne = None  # the previous linearisation freed before the next is built
         ne, cost = normal_equations(prob, x)
         improved = False
         while lam < 1e10:
