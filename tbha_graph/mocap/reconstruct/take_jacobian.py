@@ -18,13 +18,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..skeleton import N_JOINTS, PARENTS
-from .take_model import (ANKLES, AXIS_TRIPLES, HINGES, J, N_BONES, N_FRAME_RES, PELVIS_SIDE, PER_FRAME, TORSO_PAIRS,
-                         TakeProblem, unit)
+from .take_model import (ANKLES, AXIS_TRIPLES, HINGES, J, N_BONES, N_FRAME_RES, PELVIS_JOINTS, PELVIS_SIDE, PER_FRAME,
+                         THORAX_JOINTS, TORSO_PAIRS, TakeProblem, unit)
 
 _EYE = np.eye(3)
-#: Joints of the thorax's and the pelvis's front ``(l, r, up, lo)``: front = unit((l - r) x (up - lo)).
-THORAX_JOINTS = (J["left_shoulder"], J["right_shoulder"], J["neck"], J["chest"])
-PELVIS_JOINTS = (J["left_hip"], J["right_hip"], J["chest"], J["hips"])
 
 
 def _subtree() -> np.ndarray:
@@ -56,7 +53,7 @@ def unit_jacobian(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def front_jacobian(P: np.ndarray, joints: tuple[int, int, int, int]) -> tuple[np.ndarray, list[np.ndarray]]:
-    """A front ``unit((P_l - P_r) x (P_up - P_lo))`` ``(n, 3)`` and its derivatives by ``P_l, P_r, P_up, P_lo``
+    """A front (:func:`.take_model.front_of`) ``(n, 3)`` and its derivatives by ``P_l, P_r, P_up, P_lo``
     (four ``(n, 3, 3)``)."""
     l, r, up, lo = (P[:, k] for k in joints)
     a, b = l - r, up - lo

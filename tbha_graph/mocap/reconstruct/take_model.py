@@ -104,14 +104,21 @@ def tangent_basis(ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return e1, e2
 
 
+#: Joints of the thorax's and the pelvis's front ``(l, r, up, lo)``: front = unit((l - r) x (up - lo)).
+THORAX_JOINTS = (J["left_shoulder"], J["right_shoulder"], J["neck"], J["chest"])
+PELVIS_JOINTS = (J["left_hip"], J["right_hip"], J["chest"], J["hips"])
+
+
+def front_of(P: np.ndarray, joints: tuple[int, int, int, int]) -> np.ndarray:
+    """The front ``unit((P_l - P_r) x (P_up - P_lo))`` ``(..., n, 3)`` of joints ``(..., n, 16, 3)``."""
+    l, r, up, lo = (P[..., k, :] for k in joints)
+    return unit(np.cross(l - r, up - lo))
+
+
 def fronts(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The thorax's and the pelvis's forward directions ``(..., n, 3)`` from joints ``(..., n, 16, 3)``
     (left × up, so +z of a body facing +z)."""
-    def at(name):
-        return P[..., J[name], :]
-    thorax = unit(np.cross(at("left_shoulder") - at("right_shoulder"), at("neck") - at("chest")))
-    pelvis = unit(np.cross(at("left_hip") - at("right_hip"), at("chest") - at("hips")))
-    return thorax, pelvis
+    return front_of(P, THORAX_JOINTS), front_of(P, PELVIS_JOINTS)
 
 
 def point_positions(P: np.ndarray, offsets: np.ndarray) -> np.ndarray:
@@ -256,8 +263,8 @@ class TakeProblem:
         return x[self.n_glob:].reshape(self.n, PER_FRAME)
 
     def joints_from_frames(self, fr: np.ndarray, L: np.ndarray | None = None) -> np.ndarray:
-        """Joint positions ``(..., n, 16, 3)`` camera frame from frame unknowns ``(..., n, PER_FRAME)`` (leading
-        axes: e.g. perturbed copies of the take) and bone lengths ``L`` (the body's when not given)."""
+        """Joint positions ``(..., n, 16, 3)`` camera frame from frame unknowns ``(..., n, PER_FRAME)`` (any
+        leading axes) and bone lengths ``L`` (the body's when not given)."""
         tangent = fr[..., 3:].reshape(fr.shape[:-1] + (N_BONES, 2))
         dirs = unit(self.ref + tangent[..., 0:1] * self.e1 + tangent[..., 1:2] * self.e2)
         P = np.empty(fr.shape[:-1] + (N_JOINTS, 3))
@@ -276,7 +283,7 @@ class TakeProblem:
     # --- residuals ---------------------------------------------------------------------------
     def frame_terms(self, P: np.ndarray, g: np.ndarray) -> np.ndarray:
         """Per-frame residuals ``(..., n, N_FRAME_RES)`` of joints ``P`` ``(..., n, 16, 3)`` under globals ``g``
-        (leading axes, e.g. perturbed copies of the take, broadcast against the take's data)."""
+        (any leading axes broadcast against the take's data)."""
         w, d = self.w, self.d
         f = np.exp(g[0])
         nf, dfl = self.floor(g)
