@@ -188,10 +188,14 @@ def _reprojection(prob: TakeProblem, P, g, thorax, d_thorax, pelvis, d_pelvis, o
     add(m_i, np.broadcast_to(_EYE, (n, N_JOINTS, 3, 3)) + d_axis @ (-U2 + U1))  # the point's own joint (m == j)
     add(a_i, d_axis @ -U1, a_i != m_i)
     add(b_i, d_axis @ U2, b_i != m_i)
-    for k in range(4):  # the front's four joints
-        D = np.where(side[..., None], d_pelvis[k][:, None], d_thorax[k][:, None])
-        joint = np.where(PELVIS_SIDE, PELVIS_JOINTS[k], THORAX_JOINTS[k])
-        add(joint, o_out * (O @ proj @ D))
+    # the front's four joints: point j's rows += Gq_j o_out_j O_j proj_j D_k (D_k of its front), the first three
+    # factors once for all four joints; each point's rows go to its own front's joints
+    GqOP = Gq @ (o_out * (O @ proj))  # (n, 16, 2, 3)
+    pel = np.flatnonzero(PELVIS_SIDE)
+    tho = np.flatnonzero(~PELVIS_SIDE)
+    for k in range(4):
+        view[:, pel, :, PELVIS_JOINTS[k], :] += (GqOP[:, pel] @ d_pelvis[k][:, None]).transpose(1, 0, 2, 3)
+        view[:, tho, :, THORAX_JOINTS[k], :] += (GqOP[:, tho] @ d_thorax[k][:, None]).transpose(1, 0, 2, 3)
     return {"Gq": Gq, "axis": axis, "out": outv, "dlogf": drho * s[..., None] * (f * Q[..., :2] / z[..., None])}
 
 

@@ -143,21 +143,23 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray) -> tuple[Normal, float]
     up1 = np.zeros((n, m, m))
     up2 = np.zeros((n, m, m))
     acc, slide = prob.coupled_terms(P0, nf)
-    if n > 2:
-        s = prob.acc_scale
-        dPs = dP * s[None, :, None]
+    if n > 2:  # window i (frames i, i+1, i+2, mask m_i) has Jacobian c_k S dP_(i+k) on frame i + k, c = (1, -2, 1):
+        # one product per block diagonal, dP_tᵀ S² dP_(t+k) (k = 0, 1, 2), weighted by the windows that hold both
+        s2 = prob.acc_scale[None, :, None] ** 2
+        mask = prob.d.acc_mask()
         c = (1.0, -2.0, 1.0)
-        mask = prob.d.acc_mask()[:, None, None]
         for k in range(3):
-            bf[k:n - 2 + k] += c[k] * _gram_vec(dPs[k:n - 2 + k], acc)
-            for l in range(k, 3):
-                blk = mask * c[k] * c[l] * _gram(dPs[k:n - 2 + k], dPs[l:n - 2 + l])
-                if l == k:
-                    diag[k:n - 2 + k] += blk
-                elif l - k == 1:
-                    up1[k:n - 2 + k] += blk
-                else:
-                    up2[k:n - 2 + k] += blk
+            bf[k:n - 2 + k] += c[k] * _gram_vec(dP[k:n - 2 + k] * prob.acc_scale[None, :, None], acc)
+        w0 = np.zeros(n)  # sum over the windows holding frame t of m_i c_k²
+        for k in range(3):
+            w0[k:n - 2 + k] += c[k] ** 2 * mask
+        w1 = np.zeros(n - 1)  # pairs (t, t+1): windows i = t (c0 c1) and i = t - 1 (c1 c2)
+        w1[:n - 2] += c[0] * c[1] * mask
+        w1[1:] += c[1] * c[2] * mask
+        dPs2 = dP * s2
+        diag += w0[:, None, None] * _gram(dP, dPs2)
+        up1[:-1] += w1[:, None, None] * _gram(dPs2[:-1], dP[1:])
+        up2[:-2] += (c[0] * c[2] * mask)[:, None, None] * _gram(dPs2[:-2], dP[2:])
     step, both = prob.slide_vectors(P0, nf)
     norm = np.linalg.norm(step, axis=-1, keepdims=True)
     u = np.where(both[..., None], step / np.maximum(norm, 1e-9), 0.0)
@@ -183,7 +185,7 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray) -> tuple[Normal, float]
         bg = Jg.T @ r_full
         Jf = Jg[: n * F].reshape(n, F, G)
         C = _gram(dR, Jf)
-        if n > 2:  # accelerations depend on globals too when bone lengths are free
+        if n > 2 and prob.layout.free_lengths:  # accelerations depend on globals too when bone lengths are free
             Ja = Jg[n * F: n * F + (n - 2) * N_JOINTS * 3].reshape(n - 2, N_JOINTS * 3, G)
             s_acc = prob.acc_scale[None, :, None]
             am = prob.d.acc_mask()[:, None, None]
