@@ -40,6 +40,9 @@ twist prior (the pelvis faces where the thorax faces, ``sigma_twist`` about 11 d
    the tighter ones pulled the choice 20-100 % off, since a metric prior's cost scales with the focal length.
    The winner then goes to every frame (interpolated), LM with focal and floor free; with the focal length
    chosen (or given), the pose is solved at it under the full priors: LM, the depth-side search, LM.
+   A take longer than ``window_frames`` (300) finds its camera and floor on every k-th frame (at most 300),
+   then solves the pose in overlapping windows of 300 frames with them held (:func:`solve_windows`): memory
+   stays that of one window and time grows linearly (``bench/solver_speed.py``).
 5. **World frame.** y up = the floor normal, origin on the floor below the hips on the first frame, z the
    actor's forward on the first frame made horizontal (the actor faces +z in the T-pose).
 
@@ -99,6 +102,10 @@ class SolveTakeParams(BaseModel):
     free_lengths: bool = Field(False, description="refine the bone lengths from the take around the body's (3 % prior); measured on the sample: no better, so off")
     side_search: bool = Field(True, description="re-decide limbs' depth sides over time segments by total cost")
     select_sigma_twist: float = Field(0.5, gt=0, description="twist prior while the focal length is chosen (no torso acceleration prior then): measured on 4 renders, the tighter pose priors pull the choice 20-100 % off")
+    window_frames: int = Field(300, ge=60, description="a take longer than this is solved, once the camera is found, in "
+                               "overlapping windows of this many frames with the camera held: memory stays that of one "
+                               "window, time grows linearly; the camera then comes from every k-th frame (at most this many)")
+    window_overlap: int = Field(30, ge=6, description="frames two neighbouring windows share (cross-faded)")
     cross_seed: bool = Field(True, description="re-solve the best start's depth sides at the other starts' focal lengths")
 
 
@@ -246,7 +253,7 @@ def first_skeleton(points, tracked, lengths, f, centre, width, height, fps, p: S
 
 
 def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: SolveTakeParams, free_offsets: bool,
-                 focal_prior=None, contact=None) -> tuple[TakeProblem, float]:
+                 focal_prior=None, contact=None, held_globals: np.ndarray | None = None) -> tuple[TakeProblem, float]:
     """A :class:`TakeProblem` around joints ``P`` and a floor ``(normal (3,), offset)`` (or a camera whose world
     y is up); contacts detected from ``P`` unless given. Returns the problem and the floor offset."""
     if isinstance(cam_or_floor, Camera):
@@ -260,16 +267,22 @@ def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: Solve
                     rest_pair_distances(lengths, p.ankle_height))
     w = Weights(sigma_px=p.sigma_px, sigma_acc=p.sigma_acc, sigma_twist=p.sigma_twist, sigma_acc_torso=p.sigma_acc_torso)
     offsets = point_offsets_of(p)
-    return TakeProblem(data, bone_directions(P), nf, w, offsets, free_offsets=free_offsets,
+    return TakeProblem(data, bone_directions(P), nf, w, offsets, fixed_globals=held_globals, free_offsets=free_offsets,
                        focal_prior=focal_prior, free_lengths=p.free_lengths), d
 
 
 def solve_frames(points, weight, lengths, centre, fps, P0, floor, g_start, p, iterations, free_offsets, focal_prior,
-                 side_search: bool, contact: np.ndarray | None = None):
-    """Whole-take solve from joints ``P0``: LM, then (optionally) the depth-side search and LM again.
+                 side_search: bool, contact: np.ndarray | None = None, hold_globals: bool = False):
+    """Whole-take solve from joints ``P0``: LM, then (optionally) the depth-side search and LM again; the globals
+    ``g_start`` held when ``hold_globals`` (a window of a long take: camera and floor known).
     Returns ``(problem, x, cost, normal equations, flips kept)``."""
-    prob, _ = make_problem(points, weight, lengths, centre, fps, P0, floor, p, free_offsets, focal_prior, contact)
-    x = np.concatenate([g_start, pack_initial(P0, prob.ref)])
+    def start(P, fl, g):
+        prob, _ = make_problem(points, weight, lengths, centre, fps, P, fl, p, free_offsets, focal_prior, contact,
+                               g if hold_globals else None)
+        x = pack_initial(P, prob.ref)
+        return prob, (x if hold_globals else np.concatenate([g, x]))
+
+    prob, x = start(P0, floor, g_start)
     x, cost, _, ne = levenberg_marquardt(prob, x, iterations)
     kept = 0
     if side_search:
@@ -277,11 +290,53 @@ def solve_frames(points, weight, lengths, centre, fps, P0, floor, g_start, p, it
         P = prob.solution(x)[4]
         P, kept = search_sides(prob, P, g)
         nf, d = prob.floor(g)
-        prob, _ = make_problem(points, weight, lengths, centre, fps, P, (nf, d), p, free_offsets, focal_prior, contact)
         g[1:3] = 0.0
-        x = np.concatenate([g, pack_initial(P, prob.ref)])
+        prob, x = start(P, (nf, d), g)
         x, cost, _, ne = levenberg_marquardt(prob, x, iterations)
     return prob, x, cost, ne, kept
+
+
+def joints_from_directions(root: np.ndarray, dirs: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """Joints ``(n, 16, 3)`` from root positions ``(n, 3)``, unit bone directions ``(n, 15, 3)`` and bone lengths
+    ``(15,)`` (bone b ends at joint b + 1)."""
+    P = np.empty((root.shape[0], N_JOINTS, 3))
+    P[:, 0] = root
+    for j in range(1, N_JOINTS):  # joint order has parents first
+        P[:, j] = P[:, PARENTS[j]] + lengths[j - 1] * dirs[:, j - 1]
+    return P
+
+
+def solve_windows(points, weight, lengths, centre, fps, P0, floor, g, p: SolveTakeParams, contact,
+                  window: int, overlap: int) -> tuple[np.ndarray, int, int]:
+    """The final solve of a long take in overlapping windows of ``window`` frames, camera and floor held
+    (globals ``g``, floor ``(normal, offset)``): LM, the depth-side search, LM on each window in turn, started
+    from ``P0`` ``(n, 16, 3)`` with its first ``overlap`` frames from the previous window's solution (so depth
+    sides carry on), which it replaces over the overlap by a linear cross-fade of root positions and bone
+    directions. Memory is that of one window; time is linear in the frames. Returns joints ``(n, 16, 3)``
+    (camera frame, metres), the mirrors kept and the number of windows."""
+    n = P0.shape[0]
+    P = P0.copy()
+    L = np.linalg.norm(P0[0, 1:] - P0[0, PARENTS[1:]], axis=-1)
+    step = window - overlap
+    kept, a, prev_end, count = 0, 0, 0, 0  # frames [a, prev_end) hold the previous window's solution (the overlap)
+    while True:
+        b = n if n - a <= window + step // 2 else a + window  # a short remainder joins the last window
+        rows = slice(a, b)
+        prob, x, _, _, k = solve_frames(points[rows], weight[rows], lengths, centre, fps, P[rows], floor, g, p,
+                                        p.max_iterations, False, None, p.side_search, contact[rows], hold_globals=True)
+        kept, count = kept + k, count + 1
+        Pw = prob.solution(x)[4]
+        lo = prev_end - a
+        if lo > 0:  # cross-fade from the previous window (w = 0) to this one (w = 1)
+            w = (np.arange(lo) + 1.0) / (lo + 1.0)
+            root = (1 - w)[:, None] * P[a:prev_end, 0] + w[:, None] * Pw[:lo, 0]
+            dirs = unit((1 - w)[:, None, None] * bone_directions(P[a:prev_end])
+                        + w[:, None, None] * bone_directions(Pw[:lo]))
+            P[a:prev_end] = joints_from_directions(root, dirs, L)
+        P[a + lo:b] = Pw[lo:]
+        if b == n:
+            return P, kept, count
+        prev_end, a = b, b - overlap
 
 
 def interpolate_joints(Psub: np.ndarray, sub: np.ndarray, n: int) -> np.ndarray:
@@ -295,12 +350,7 @@ def interpolate_joints(Psub: np.ndarray, sub: np.ndarray, n: int) -> np.ndarray:
     dirs = bone_directions(Psub)
     di = np.stack([np.stack([np.interp(frames, sub, dirs[:, b, c]) for c in range(3)], axis=1)
                    for b in range(N_JOINTS - 1)], axis=1)
-    di = unit(di)
-    P = np.empty((n, N_JOINTS, 3))
-    P[:, 0] = root
-    for j in range(1, N_JOINTS):  # joint order has parents first
-        P[:, j] = P[:, PARENTS[j]] + lengths[j - 1] * di[:, j - 1]
-    return P
+    return joints_from_directions(root, unit(di), lengths)
 
 
 def world_frame(P: np.ndarray, nf: np.ndarray, d: float) -> tuple[np.ndarray, np.ndarray]:
@@ -400,13 +450,17 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
                 cost, probs, xs = cost_k, prob_k, x_k
         report["focal_cross_seeded"] = cross
         sweep = sweep + cross
-    # the chosen start on every frame (interpolated from the subsample), LM with the focal length and floor free
+    # the chosen start on every frame (interpolated from the subsample), LM with the focal length and floor free;
+    # on a long take on every k-th frame (at most window_frames), the camera then held in windows
+    whole = n <= p.window_frames
+    k_cam = 1 if whole else int(np.ceil(n / p.window_frames))
+    cam_rows = np.arange(0, n, k_cam)
     g_sub = probs.globals_of(xs)
     nf0, d0 = probs.floor(g_sub)
     P1 = interpolate_joints(probs.solution(xs)[4], sub, n)
     gs = np.concatenate([g_sub[:1], [0.0, 0.0, d0], g_sub[4:]])
-    prob, x, cost, ne, _ = solve_frames(points, weight, lengths, centre, fps, P1, (nf0, d0), gs, q, p.max_iterations,
-                                        False, focal_prior, False, contact)
+    prob, x, cost, ne, _ = solve_frames(points[cam_rows], weight[cam_rows], lengths, centre, fps / k_cam, P1[cam_rows],
+                                        (nf0, d0), gs, q, p.max_iterations, False, focal_prior, False, contact[cam_rows])
     kept2 = 0
     # uncertainty of the focal length (log f) from the normal equations, scaled by the fit's residual level
     dof = max(prob.residuals(x).size - x.size, 1)
@@ -416,11 +470,18 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
         focal_sd_pct = float(np.sqrt(max(cov[0, 0], 0.0)) * 100.0)
     except Exception:  # noqa: BLE001 - a singular system: the focal length is not determined
         focal_sd_pct = float("inf")
-    if estimated or p.side_search:  # the pose at the chosen focal length under p's priors: LM, the depth-side
-        f_sel, nf_s, d_s, _, P_s = prob.solution(x)  # search on the whole take, LM (focal held)
+    if whole and (estimated or p.side_search):  # the pose at the chosen focal length under p's priors: LM,
+        f_sel, nf_s, d_s, _, P_s = prob.solution(x)  # the depth-side search on the whole take, LM (focal held)
         g_s = np.concatenate([[np.log(f_sel), 0.0, 0.0, d_s], prob.globals_of(x)[4:]])
-        prob, x, cost, ne, _ = solve_frames(points, weight, lengths, centre, fps, P_s, (nf_s, d_s), g_s, p,
-                                            p.max_iterations, False, (f_sel, 1e-4), p.side_search, contact)
+        prob, x, cost, ne, kept2 = solve_frames(points, weight, lengths, centre, fps, P_s, (nf_s, d_s), g_s, p,
+                                                p.max_iterations, False, (f_sel, 1e-4), p.side_search, contact)
+    elif not whole:  # the same in windows, camera and floor held
+        f_sel, nf_s, d_s, _, P_s = prob.solution(x)
+        g_s = np.concatenate([[np.log(f_sel), 0.0, 0.0, d_s], prob.globals_of(x)[4:]])
+        P_w, kept2, report["windows"] = solve_windows(points, weight, lengths, centre, fps, interpolate_joints(P_s, cam_rows, n),
+                                   (nf_s, d_s), g_s, p, contact, p.window_frames, p.window_overlap)
+        prob, _ = make_problem(points, weight, lengths, centre, fps, P_w, (nf_s, d_s), p, False, None, contact, g_s)
+        x = pack_initial(P_w, prob.ref)
     f, nf, d, offs, P = prob.solution(x)
     terms = prob.term_costs(x)
     B, origin = world_frame(P, nf, d)
