@@ -51,6 +51,7 @@ class Normal:
     D: np.ndarray
     C: np.ndarray
     bg: np.ndarray
+    band: np.ndarray | None = None  # the frame block in LAPACK band storage, undamped (built by solve)
 
     def solve(self, lam: float) -> np.ndarray:
         """``dx`` (globals first, then frames) of ``(A + lam diag(A)) dx = -b``: banded Cholesky of the frame
@@ -61,10 +62,11 @@ class Normal:
 
         n, m = self.bf.shape
         N = n * m
-        diag = self.diag.copy()
-        k = np.arange(m)
-        diag[:, k, k] += lam * diag[:, k, k] + 1e-9
-        chol, info = lapack.dpbtrf(lower_band(diag, self.up1, self.up2), lower=1, overwrite_ab=1)
+        if self.band is None:  # built once per linearisation; each damping only changes its diagonal (row 0)
+            self.band = lower_band(self.diag, self.up1, self.up2)
+        ab = self.band.copy(order="F")
+        ab[0] += lam * ab[0] + 1e-9
+        chol, info = lapack.dpbtrf(ab, lower=1, overwrite_ab=1)
         if info != 0:
             raise np.linalg.LinAlgError(f"frame matrix not positive definite (dpbtrf info {info})")
 
@@ -111,8 +113,9 @@ def _gram_vec(A: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.matmul(np.swapaxes(A, 1, 2), v[..., None])[..., 0]
 
 
-def normal_equations(prob: "TakeProblem", x: np.ndarray) -> tuple[Normal, float]:
-    """The Gauss–Newton normal equations of ``prob`` at ``x`` (blocks, see :class:`Normal`) and the cost.
+def normal_equations(prob: "TakeProblem", x: np.ndarray, r: np.ndarray | None = None) -> tuple[Normal, float]:
+    """The Gauss–Newton normal equations of ``prob`` at ``x`` (blocks, see :class:`Normal`) and the cost;
+    ``r``: ``prob.residuals(x)`` if the caller has it (not computed again).
 
     Jacobians are analytic (:mod:`.take_jacobian`): the frame unknowns' per frame (a frame's own residuals depend
     on its own unknowns only), accelerations and slides by the chain rule through the joints' differences, and
@@ -122,8 +125,15 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray) -> tuple[Normal, float]
     fr = prob.frames_of(x)
     L = prob.lengths_of(g)
     P0 = prob.joints_from_frames(fr, L)
-    R0 = prob.frame_terms(P0, g)
     nf = prob.floor(g)[0]
+    if r is None:
+        R0 = prob.frame_terms(P0, g)
+        acc, slide = prob.coupled_terms(P0, nf)
+    else:  # residuals() order: frame blocks, accelerations, slides, global priors
+        n_acc = max(n - 2, 0) * N_JOINTS * 3
+        R0 = r[: n * F].reshape(n, F)
+        acc = r[n * F: n * F + n_acc].reshape(max(n - 2, 0), N_JOINTS * 3)
+        slide = r[n * F + n_acc: n * F + n_acc + 2 * n].reshape(n, 2)
     dP = joint_jacobian(prob, fr, L).reshape(n, N_JOINTS * 3, m)
     dR = np.empty((n, F, m))
     pieces: list[dict] = []
@@ -142,7 +152,6 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray) -> tuple[Normal, float]
     bf = _gram_vec(dR, R0)
     up1 = np.zeros((n, m, m))
     up2 = np.zeros((n, m, m))
-    acc, slide = prob.coupled_terms(P0, nf)
     if n > 2:  # window i (frames i, i+1, i+2, mask m_i) has Jacobian c_k S dP_(i+k) on frame i + k, c = (1, -2, 1):
         # one product per block diagonal, dP_tᵀ S² dP_(t+k) (k = 0, 1, 2), weighted by the windows that hold both
         s2 = prob.acc_scale[None, :, None] ** 2
@@ -174,7 +183,7 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray) -> tuple[Normal, float]
         diag[:-1] += _gram(d_prev[1:], d_prev[1:])
         up1[:-1] += _gram(d_prev[1:], d_now[1:])
         bf[:-1] += _gram_vec(d_prev[1:], slide[1:])
-    r_full = np.concatenate([R0.ravel(), acc.ravel(), slide.ravel(), prob.global_terms(g)])
+    r_full = np.concatenate([R0.ravel(), acc.ravel(), slide.ravel(), prob.global_terms(g)]) if r is None else r
     cost = 0.5 * float(r_full @ r_full)
     D = np.zeros((G, G))
     C = np.zeros((n, m, G))
@@ -209,10 +218,10 @@ def levenberg_marquardt(prob: "TakeProblem", x0: np.ndarray, max_iterations: int
     lam = 1e-3
     it = 0
     rel = 1.0
-    ne = None
+    ne, r = None, None
     for it in range(1, max_iterations + 1):
         ne = None  # the previous linearisation freed before the next is built
-        ne, cost = normal_equations(prob, x)
+        ne, cost = normal_equations(prob, x, r)
         improved = False
         while lam < 1e10:
             try:
@@ -225,7 +234,7 @@ def levenberg_marquardt(prob: "TakeProblem", x0: np.ndarray, max_iterations: int
             cn = 0.5 * float(rn @ rn)
             if np.isfinite(cn) and cn < cost:
                 rel = (cost - cn) / max(cost, 1e-12)
-                x, cost = prob.recentre(xn), cn
+                x, cost, r = prob.recentre(xn), cn, rn  # re-centring changes the tangents' reference, not P
                 lam = max(lam / 3.0, 1e-7)
                 improved = True
                 break
