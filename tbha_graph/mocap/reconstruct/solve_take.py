@@ -30,14 +30,16 @@ twist prior (the pelvis faces where the thorax faces, ``sigma_twist`` about 11 d
    bones (pelvis, thorax, each limb bone, head) and each run of frames where the bone points out of the
    image plane, the mirrored run and the current one are re-optimised together (all windows of a group in
    one problem) and the mirror kept where it ends cheaper (:func:`.take_solver.search_sides_lm`).
-4. **Focal length.** The start with the lowest cost on the subsample wins; its depth sides are then re-solved
-   at the other starts' focal lengths, on the subsample too (``cross_seed``). Choosing there rather than on
-   the whole take gave the same choice on the sample and three renders at a third of the time (the whole
-   take's LM per start was the dearest part on long takes). Another start within ``RIVAL_COST`` (15 %) of the
-   best subsample cost at a clearly different focal length is reported as a warning: the take cannot tell
-   them apart (measured: the sample's and 131_01's rivals at 10-11 %, 131_02's at 0.3 %). These starts run
-   under the weaker priors (``select_sigma_twist``, no torso acceleration prior): measured on four renders,
-   the tighter ones pulled the choice 20-100 % off, since a metric prior's cost scales with the focal length.
+4. **Focal length.** The start with the lowest cost on the subsample wins. Its depth sides are then re-solved
+   at the other starts' focal lengths, on the subsample too (``cross_seed``: each frame's body moved in depth
+   so its image stays, :func:`moved_in_depth`), only to test whether the take determines the focal length:
+   such a cross seed within ``RIVAL_COST`` (15 %) of the best cost at a clearly different focal length is a
+   warning (the take cannot tell them apart), never the choice. Measured on the sample and three renders, the
+   cross seeds came within 1 % of the best or below it at 0.7-2x its focal length on all four: with these
+   priors and tracks the cost is flat over the focal length, the choice among starts is luck, and the
+   warning asks for ``focal_px``. Choosing on the subsample rather than on the whole take gave the same
+   choices at a third of the time. These starts run under the weaker priors (``select_sigma_twist``, no
+   torso acceleration prior): measured on four renders, the tighter ones pulled the choice 20-100 % off.
    The winner then goes to every frame (interpolated), LM with focal and floor free; with the focal length
    chosen (or given), the pose is solved at it under the full priors: LM, the depth-side search, LM.
    A take longer than ``window_frames`` (300) finds its camera and floor on every k-th frame (at most 300),
@@ -106,7 +108,8 @@ class SolveTakeParams(BaseModel):
                                "overlapping windows of this many frames with the camera held: memory stays that of one "
                                "window, time grows linearly; the camera then comes from every k-th frame (at most this many)")
     window_overlap: int = Field(30, ge=6, description="frames two neighbouring windows share (cross-faded)")
-    cross_seed: bool = Field(True, description="re-solve the best start's depth sides at the other starts' focal lengths")
+    cross_seed: bool = Field(True, description="re-solve the best start's depth sides at the other starts' focal lengths, "
+                             "to warn when the take does not determine the focal length (never changes the choice)")
 
 
 def tpose_camera(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarray, f: float, centre: np.ndarray,
@@ -216,8 +219,8 @@ def detect_contacts(P: np.ndarray, nf: np.ndarray, d: float, fps: float, ankle_h
 #: others unchanged) at 10 % of the solve's time
 POSE_TOL = 1e-3
 
-#: A start whose subsample cost is within this fraction of the best one's, at a clearly different focal length
-#: (over 10 %), makes the focal length "ambiguous" (a warning)
+#: A start or cross seed whose subsample cost is within this fraction of the best start's, at a clearly
+#: different focal length (over 10 %), makes the focal length "ambiguous" (a warning)
 RIVAL_COST = 0.15
 
 COMPARED_TERMS = ("reprojection", "torso", "hinge", "below_floor", "acceleration", "contact", "slide", "pose", "priors")
@@ -346,6 +349,17 @@ def solve_windows(points, weight, lengths, centre, fps, P0, floor, g, p: SolveTa
         prev_end, a = b, b - overlap
 
 
+def moved_in_depth(P: np.ndarray, nf: np.ndarray, d: float, scale: float) -> tuple[np.ndarray, float]:
+    """The body ``P`` ``(n, 16, 3)`` (camera frame) as seen at ``scale`` times the focal length: each frame's body
+    moved, unchanged, to ``scale`` times its root's depth (x, y kept: the root's pixel stays, since
+    u = f x / z, and the body's image keeps its size to first order; scaling the whole scene instead scales
+    the image about its centre); the floor offset ``d`` moved with the roots' mean so the feet keep their
+    height on average. Returns the joints and the floor offset."""
+    shift = np.zeros_like(P[:, :1])
+    shift[..., 2] = (scale - 1.0) * P[:, :1, 2]
+    return P + shift, float(d - np.mean(shift[:, 0] @ nf))
+
+
 def interpolate_joints(Psub: np.ndarray, sub: np.ndarray, n: int) -> np.ndarray:
     """Joints ``(n, 16, 3)`` on every frame from joints ``Psub`` on frames ``sub``: root positions and bone
     directions interpolated linearly (directions renormalised), bones kept at their lengths."""
@@ -440,21 +454,21 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
     report["focal_sweep"] = sweep
     cost, probs, xs = best
     if p.cross_seed and len(sweep) > 1:
-        # the best start's depth sides tried at the other starts' focal lengths (the whole scene scaled, so the
-        # image stays): the costs then compare focal lengths more than depth-side choices
+        # the best start's depth sides tried at the other starts' focal lengths (each frame's body moved in depth
+        # so that its image stays, :func:`moved_in_depth`), to tell whether the take determines the focal length:
+        # a cross seed nearly as cheap is a rival (a warning below), never the choice — measured on four takes,
+        # such ties went either way (131_01 would have gone to +100 %, 131_02 to -42 %)
         f_best, nf_b, d_b, _, P_b = probs.solution(xs)
         cross = []
         for f0, f_end, _ in sweep:
             if abs(np.log(f_end / f_best)) < np.log(1.05):
                 continue
-            scale = f_end / f_best
-            gs = np.concatenate([[np.log(f_end), 0.0, 0.0, d_b * scale], probs.globals_of(xs)[4:]])
-            prob_k, x_k, cost_k, _, _ = solve_frames(points[sub], weight[sub], lengths, centre, fps / step, P_b * scale,
-                                                     (nf_b, d_b * scale), gs, q, p.calib_iterations, False,
+            P_k, d_k = moved_in_depth(P_b, nf_b, d_b, f_end / f_best)
+            gs = np.concatenate([[np.log(f_end), 0.0, 0.0, d_k], probs.globals_of(xs)[4:]])
+            prob_k, x_k, cost_k, _, _ = solve_frames(points[sub], weight[sub], lengths, centre, fps / step, P_k,
+                                                     (nf_b, d_k), gs, q, p.calib_iterations, False,
                                                      focal_prior, False, contact[sub])
             cross.append([round(f_end, 1), round(float(np.exp(prob_k.globals_of(x_k)[0])), 1), round(cost_k, 1)])
-            if cost_k < cost:
-                cost, probs, xs = cost_k, prob_k, x_k
         report["focal_cross_seeded"] = cross
         sweep = sweep + cross
     # the chosen start on every frame (interpolated from the subsample), LM with the focal length and floor free;
@@ -518,7 +532,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
     rivals = [fe for f0, fe, c in sweep if abs(np.log(fe / f)) > np.log(1.1) and c < (1 + RIVAL_COST) * min(c2 for _, _, c2 in sweep)]
     if rivals:
         report["focal_rivals_px"] = [round(r, 1) for r in rivals]
-        warnings_out.append(f"the focal length is ambiguous: {f:.0f} px fits, but so does {rivals[0]:.0f} px nearly as well; "
+        warnings_out.append(f"the focal length is ambiguous: {f:.0f} px fits, but so does {rivals[0]:.0f} px about as well; "
                             "3D positions scale with it — give the camera's focal length (focal_px) if you know it")
     if not np.isfinite(focal_sd_pct) or focal_sd_pct > 5.0:
         warnings_out.append(f"the focal length is uncertain: {f:.0f} px ± {focal_sd_pct:.1f} % (1 sd); the take may "
