@@ -78,7 +78,7 @@ def print_summary(run, out_dir: Path, verbose: bool = False) -> None:
     if warnings:
         print(f"  {len(warnings)} warning(s):")
         for w in warnings if verbose else warnings[:3]:
-            print(f"    - {w if verbose else w[:160]}")
+            print(textwrap.fill(w, width=110, initial_indent="    - ", subsequent_indent="      "))  # whole, wrapped
         if not verbose and len(warnings) > 3:
             print(f"    ... and {len(warnings) - 3} more (--verbose, or metrics.json / manifest.json)")
     written = [name for name, (nid, _) in run.graph.outputs.items() if nid in run.results]

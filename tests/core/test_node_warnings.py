@@ -19,11 +19,16 @@ class WarnParams(BaseModel):
     warn: bool = True
 
 
+#: Longer than a summary line: the summary must show it whole (wrapped), not cut
+WARNING = ("the view is close to degenerate: small 2D errors move the camera a lot, so every 3D figure of this "
+           "run may be off by tens of centimetres — give a known focal length or more joints to fix it")
+
+
 @node("warntest.source", version=1, outputs={"x": Array("float64", ("n",))}, params=WarnParams)
 def warn_source(ctx):
     """Gives a warning when asked."""
     if ctx.params.warn:
-        ctx.warn("the view is close to degenerate")
+        ctx.warn(WARNING)
     return np.arange(ctx.params.n, dtype=np.float64)
 
 
@@ -54,11 +59,11 @@ def test_warnings_reach_manifest_and_report_also_from_cache(write, cache, tmp_pa
         run = run_graph(load_graph(p, registry=_reg()), out_dir=out, cache=cache)
         assert {r.status for r in run.results.values()} == ({"ran"} if i == 0 else {"cached"})
         m = json.loads((out / "metrics.json").read_text())
-        assert m["verdict"] == "doubtful" and m["warnings"] == ["src: the view is close to degenerate"]
+        assert m["verdict"] == "doubtful" and m["warnings"] == [f"src: {WARNING}"]
         assert m["verdict_reasons"] == ["node 'src' gave a warning"] and m["mean"] == 1.0
         man = json.loads((out / "manifest.json").read_text())
-        assert man["warnings"] == [{"node": "src", "message": "the view is close to degenerate"}]
-        assert man["nodes"]["src"]["warnings"] == ["the view is close to degenerate"]
+        assert man["warnings"] == [{"node": "src", "message": WARNING}]
+        assert man["nodes"]["src"]["warnings"] == [WARNING]
         assert run.output("metrics.json")["verdict"] == "doubtful"
 
 
@@ -80,6 +85,7 @@ def test_summary_is_short_shows_verdict_and_warnings_and_verbose_shows_all(write
     assert len(out) <= 15
     text = "\n".join(out)
     assert "verdict: doubtful" in text and "src: the view is close to degenerate" in text
+    assert f"src: {WARNING}" in " ".join(line.strip() for line in out)  # whole, however long
     assert "mean" not in text  # not a headline figure
     assert main([str(p), "--plugin", "test_node_warnings", "--out", str(tmp_path / "o"), "-q", "--verbose"]) == 0
     assert "mean" in capsys.readouterr().out
