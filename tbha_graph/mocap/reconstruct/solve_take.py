@@ -316,25 +316,32 @@ def joints_from_directions(root: np.ndarray, dirs: np.ndarray, lengths: np.ndarr
 
 
 def solve_windows(points, weight, lengths, centre, fps, P0, floor, g, p: SolveTakeParams, contact,
-                  window: int, overlap: int) -> tuple[np.ndarray, int, int]:
+                  window: int, overlap: int, progress=None) -> tuple[np.ndarray, int, int]:
     """The final solve of a long take in overlapping windows of ``window`` frames, camera and floor held
     (globals ``g``, floor ``(normal, offset)``): LM, the depth-side search, LM on each window in turn, started
     from ``P0`` ``(n, 16, 3)`` with its first ``overlap`` frames from the previous window's solution (so depth
     sides carry on), which it replaces over the overlap by a linear cross-fade of root positions and bone
     directions. Memory is that of one window; time is linear in the frames. Returns joints ``(n, 16, 3)``
-    (camera frame, metres), the mirrors kept and the number of windows."""
+    (camera frame, metres), the mirrors kept and the number of windows; ``progress`` (optional) wraps the
+    windows' iterable as ``ctx.progress`` does."""
     n = P0.shape[0]
     P = P0.copy()
     L = np.linalg.norm(P0[0, 1:] - P0[0, PARENTS[1:]], axis=-1)
     step = window - overlap
-    kept, a, prev_end, count = 0, 0, 0, 0  # frames [a, prev_end) hold the previous window's solution (the overlap)
+    wins, a = [], 0
     while True:
         b = n if n - a <= window + step // 2 else a + window  # a short remainder joins the last window
+        wins.append((a, b))
+        if b == n:
+            break
+        a = b - overlap
+    kept, prev_end = 0, 0  # frames [a, prev_end) hold the previous window's solution (the overlap)
+    for a, b in (progress(wins, total=len(wins), desc="pose windows") if progress else wins):
         rows = slice(a, b)
         prob, x, _, _, k = solve_frames(points[rows], weight[rows], lengths, centre, fps, P[rows], floor, g, p,
                                         p.max_iterations, False, None, p.side_search, contact[rows], hold_globals=True,
                                         tol=POSE_TOL)
-        kept, count = kept + k, count + 1
+        kept += k
         Pw = prob.solution(x)[4]
         lo = prev_end - a
         if lo > 0:  # cross-fade from the previous window (w = 0) to this one (w = 1)
@@ -344,9 +351,8 @@ def solve_windows(points, weight, lengths, centre, fps, P0, floor, g, p: SolveTa
                         + w[:, None, None] * bone_directions(Pw[:lo]))
             P[a:prev_end] = joints_from_directions(root, dirs, L)
         P[a + lo:b] = Pw[lo:]
-        if b == n:
-            return P, kept, count
-        prev_end, a = b, b - overlap
+        prev_end = b
+    return P, kept, len(wins)
 
 
 def moved_in_depth(P: np.ndarray, nf: np.ndarray, d: float, scale: float) -> tuple[np.ndarray, float]:
@@ -392,7 +398,8 @@ def world_frame(P: np.ndarray, nf: np.ndarray, d: float) -> tuple[np.ndarray, np
 
 def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarray, width: int, height: int,
                       fps: float, p: SolveTakeParams, progress=None, confidence: np.ndarray | None = None) -> dict:
-    """The whole solve (see the module docstring) on 2D points ``(n, 16, 2)`` px. Returns a dict with
+    """The whole solve (see the module docstring) on 2D points ``(n, 16, 2)`` px; ``progress`` (optional, as
+    ``ctx.progress``: wraps an iterable) shows the starts and the pose windows. Returns a dict with
     ``joints`` (n, 16, 3) world metres, ``camera`` (:class:`Camera`), ``sides`` (n, 16) int8, ``report``.
 
     BLAS runs on one thread meanwhile: the solver's matrices are small (33 x 33 frame blocks, a band of 99),
@@ -433,7 +440,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
     contact = contacts_from_image(points, tracked, fps)
     report["planted_pct"] = [round(float(c) * 100, 1) for c in contact.mean(axis=0)]
     best, sweep, kept1 = None, [], 0
-    for k, f0 in enumerate(starts):
+    for f0 in (progress(starts, total=len(starts), desc="focal starts") if progress else starts):
         try:
             P0, cam = first_skeleton(points, tracked, lengths, f0, centre, width, height, fps, p)
         except (NodeError, ValueError):
@@ -446,8 +453,6 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
         sweep.append([round(f0, 1), round(f_end, 1), round(cost_k, 1)])
         if best is None or cost_k < best[0]:
             best, kept1 = (cost_k, prob_k, x_k), kept
-        if progress:
-            progress(k + 1, len(starts))
     if best is None:
         raise NodeError("no starting focal length gave a first skeleton",
                         hint="check that the take opens with a T-pose facing the camera, or set focal_px")
@@ -501,7 +506,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
         f_sel, nf_s, d_s, _, P_s = prob.solution(x)
         g_s = np.concatenate([[np.log(f_sel), 0.0, 0.0, d_s], prob.globals_of(x)[4:]])
         P_w, kept2, report["windows"] = solve_windows(points, weight, lengths, centre, fps, interpolate_joints(P_s, cam_rows, n),
-                                   (nf_s, d_s), g_s, p, contact, p.window_frames, p.window_overlap)
+                                   (nf_s, d_s), g_s, p, contact, p.window_frames, p.window_overlap, progress)
         prob, _ = make_problem(points, weight, lengths, centre, fps, P_w, (nf_s, d_s), p, False, None, contact, g_s)
         x = pack_initial(P_w, prob.ref)
     f, nf, d, offs, P = prob.solution(x)
@@ -571,7 +576,7 @@ def solve_take(ctx, tracks, body):
         ctx.warn("confidence_power is set but the tracks carry no confidence: every tracked point weighs the same "
                  "(detectors such as detect.mediapipe_pose give one; suit trackers do not)")
     out = solve_take_arrays(tr.points, tr.tracked, lengths, tr.width, tr.height, float(tr.fps), p,
-                            progress=lambda k, total: ctx.log(f"stage {k}/{total}"), confidence=confidence)
+                            progress=ctx.progress, confidence=confidence)
     rep = out["report"]
     ctx.log(f"focal {rep['focal_px']:.0f} px (± {rep['focal_sd_pct']:.1f} %), camera {rep['camera_height_m']:.2f} m high, "
             f"{rep['camera_distance_m']:.2f} m away, tilt {rep['camera_tilt_deg']:.1f}°; {rep['solve_seconds']:.1f} s")
