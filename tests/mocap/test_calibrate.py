@@ -210,6 +210,23 @@ def test_checkerboard_focal_within_one_percent(tmp_path):
     assert out["camera"].camera().to_camera(np.zeros(3))[2] > 0.3
 
 
+def test_checkerboard_pipeline_gives_the_focal_length_for_the_capture(tmp_path, monkeypatch, capsys):
+    """``pipelines/checkerboard.yaml`` (what docs/capture.md tells a user to run) writes lens.json with fx_px."""
+    import json
+    from pathlib import Path
+
+    from tbha_graph.cli.run import main
+
+    K = np.array([[720.0, 0, 319.5], [0, 720.0, 239.5], [0, 0, 1]])
+    _render_board_views(tmp_path, K, 9, 6, 0.03, 8)
+    monkeypatch.setenv("TBHA_CACHE_DIR", str(tmp_path / "cache"))
+    pipe = Path(__file__).resolve().parents[2] / "pipelines" / "checkerboard.yaml"
+    assert main([str(pipe), "--var", f"clip={tmp_path}", "--set", "calibrate.square_size=0.03",
+                 "--out", str(tmp_path / "lens"), "-q"]) == 0
+    rep = json.loads((tmp_path / "lens" / "lens.json").read_text())
+    assert rep["fx_px"] == pytest.approx(720.0, rel=0.01) and rep["views_used"] == 8
+
+
 def test_checkerboard_wrong_board_size_is_explained(tmp_path):
     K = np.array([[720.0, 0, 319.5], [0, 720.0, 239.5], [0, 0, 1]])
     _render_board_views(tmp_path, K, 9, 6, 0.03, 3)
