@@ -22,6 +22,7 @@ stated.
 * ``MOTION``: 3D joint positions over time (:mod:`.bundles.motion`).
 * ``ROTATIONS``: joint rotations relative to their parents, BVH semantics (:mod:`.bundles.rotations`).
 * ``TRUTH``: a rendered video's ground truth, ``{}`` when there is none (:mod:`.bundles.truth`).
+* ``SILHOUETTE``: the actor's outline per frame as a distance-outside field (``segment.silhouette``).
 * ``SIDES`` (depth side per frame and joint), ``ERRORS`` (per-frame error curves), ``SMPL_PARAMS``
   (AMASS layout), ``JOINTS3D_EXPORT`` (``joints3d.npz``): arrays read by name.
 * ``METRICS`` (metrics.json) and ``REPORT`` / :func:`report_port` (a node's report): JSON.
@@ -40,7 +41,7 @@ from .suit import SuitSpec
 
 __all__ = [
     "Bundle", "VideoClip", "VIDEO", "VIDEO_FILE", "DETECTIONS", "TRACKS2D", "CAMERA", "BODY", "SUIT", "COLORS",
-    "MOTION", "ROTATIONS", "TRUTH", "SIDES", "ERRORS", "SMPL_PARAMS", "JOINTS3D_EXPORT", "METRICS", "REPORT", "report_port",
+    "MOTION", "ROTATIONS", "TRUTH", "SILHOUETTE", "SIDES", "ERRORS", "SMPL_PARAMS", "JOINTS3D_EXPORT", "METRICS", "REPORT", "report_port",
     "BVH_FILE", "IMAGE", "MESH", "JOINTS3D", "JOINTS2D",
 ]
 
@@ -75,6 +76,12 @@ TRACKS2D = Bundle(
     "tracks",
     {"points": JOINTS2D, "tracked": Array("bool", ("n_frames", N_JOINTS)), "fps": Array("float", ())},
     doc="2D joint tracks in pixels",
+)
+SILHOUETTE = Bundle(
+    "silhouette",
+    {"distance": Array("uint8", ("n_frames", None, None)), "scale": Array("float", ())},
+    doc="per frame, each pixel's distance outside the actor's silhouette (0 inside), uint8 in pixels of the "
+        "field's resolution (scale x the frame's; full-resolution px = value / scale, saturating at 255); area_px (n_frames,)",
 )
 CAMERA = Model(CameraModel, doc="calibrated camera")
 BODY = Model(Body, doc="bone lengths {bone: metres}")

@@ -42,25 +42,37 @@ def synthetic(truth, n: int, f: float = 700.0, start: int = 60):
     return P, f * Q[..., :2] / Q[..., 2:3] + centre, centre, L
 
 
-def problem(truth, P, uv, centre, L, weights: Weights, free_offsets=False, focal_prior=None, free_lengths=False):
+def problem(truth, P, uv, centre, L, weights: Weights, free_offsets=False, focal_prior=None, free_lengths=False,
+            silhouette=None):
     R = truth["R"]
     nf, d = R[:, 1], float(-R[:, 1] @ truth["t"])
     fps = float(truth["fps"])
     contact = contacts_from_image(uv, np.ones(uv.shape[:2], bool), fps)
-    data = TakeData(uv, np.ones(uv.shape[:2]), L, centre, fps, 0.08, contact, rest_pair_distances(L, 0.08))
+    data = TakeData(uv, np.ones(uv.shape[:2]), L, centre, fps, 0.08, contact, rest_pair_distances(L, 0.08),
+                    silhouette=silhouette)
     prob = TakeProblem(data, bone_directions(P), nf, weights, DEFAULT_POINT_OFFSETS.copy(), free_offsets=free_offsets,
                        focal_prior=focal_prior, free_lengths=free_lengths)
     return prob, d
 
 
-@pytest.mark.parametrize("free_offsets,free_lengths,split", [(False, False, False), (True, False, False),
-                                                             (False, True, False), (False, False, True)])
-def test_block_normal_equations_equal_the_dense_ones(truth, free_offsets, free_lengths, split, monkeypatch):
+@pytest.mark.parametrize("free_offsets,free_lengths,split,sil", [(False, False, False, False), (True, False, False, False),
+                                                                 (False, True, False, False), (False, False, True, False),
+                                                                 (False, False, False, True)])
+def test_block_normal_equations_equal_the_dense_ones(truth, free_offsets, free_lengths, split, sil, monkeypatch):
     from tbha_graph.mocap.reconstruct import take_solver
 
     monkeypatch.setattr(take_solver, "JACOBIAN_CHUNK", 4)  # the frame Jacobian in chunks of 4, 4 and 1 frames
     P, uv, centre, L = synthetic(truth, 9)
-    prob, d = problem(truth, P, uv + 0.7, centre, L, Weights(), free_offsets=free_offsets, free_lengths=free_lengths)
+    silhouette = None
+    if sil:  # stick-figure silhouettes 3 px right of the joints: every point a little outside (the focal's column too)
+        from test_take_jacobian import thin_silhouettes
+
+        silhouette = thin_silhouettes(700.0 * P[..., :2] / P[..., 2:3] + centre + [3.0, 0.0])
+    prob, d = problem(truth, P, uv + 0.7, centre, L, Weights(support_band=-0.03 if sil else 0.1), free_offsets=free_offsets,
+                      free_lengths=free_lengths, silhouette=silhouette)
+    prob.d.away = np.arange(9) % 3 == 0 if sil else None
+    if sil:  # limbs untracked on every other frame: the silhouette's term on their points
+        prob.d.weight[::2, 5:] = 0.0
     if split:  # two independent windows in one problem (the side search's batches): nothing links frame 3 to 4
         prob.d.breaks = np.r_[True, False, False, False, True, False, False, False, False]
         acc, _ = prob.coupled_terms(P, prob.n_ref)
@@ -80,6 +92,12 @@ def test_block_normal_equations_equal_the_dense_ones(truth, free_offsets, free_l
         J[:, i] = (prob.residuals(xp) - prob.residuals(xm)) / 2e-6
     A = J.T @ J
     want = -np.linalg.solve(A + 0.1 * np.diag(np.diag(A)), J.T @ r0)
+    if sil:
+        assert prob.term_costs(x)["silhouette"] > 1.0
+        from tbha_graph.mocap.reconstruct.take_model import N_FRAME_RES, SIL_PAIRS
+
+        inside = prob.frame_terms(prob.joints_from_frames(prob.frames_of(x), L), prob.globals_of(x))
+        assert np.abs(inside[:, N_FRAME_RES:N_FRAME_RES + len(SIL_PAIRS)]).max() > 0.5  # the inside term active too
     ne, cost = normal_equations(prob, x)
     got = ne.solve(0.1)
     assert cost == pytest.approx(0.5 * r0 @ r0, rel=1e-12)

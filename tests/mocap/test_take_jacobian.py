@@ -1,6 +1,8 @@
 """The solver's analytic frame Jacobian (take_jacobian) equals central finite differences of the residuals,
 term by term, with every kind of residual active (bent-wrong hinges, ankles below the floor and planted ones
-above it, twisted torsos, points with zero weight, robust reprojection beyond its scale)."""
+above it, twisted torsos, points with zero weight, robust reprojection beyond its scale, joints and bone
+midpoints outside the actor's silhouette, some beyond the soft-L1 scale, the lower ankle above its support
+band, the torso facing the camera on frames flagged away, the feet above the silhouette's lowest row)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -9,14 +11,35 @@ import numpy as np
 
 from tbha_graph.mocap.reconstruct.solve_take import contacts_from_image, rest_pair_distances
 from tbha_graph.mocap.reconstruct.take_jacobian import joint_jacobian, residual_jacobian
-from tbha_graph.mocap.reconstruct.take_model import (DEFAULT_POINT_OFFSETS, HINGES, N_FRAME_RES, PER_FRAME,
-                                                     TORSO_PAIRS, TakeData, TakeProblem, Weights, bone_directions,
-                                                     pack_initial, point_positions)
+from tbha_graph.mocap.reconstruct.take_model import (DEFAULT_POINT_OFFSETS, HINGES, N_FRAME_RES, N_SIL, PER_FRAME,
+                                                     TORSO_PAIRS, SilhouetteField, TakeData, TakeProblem, Weights,
+                                                     bone_directions, pack_initial, point_positions)
+from tbha_graph.mocap.segment.silhouette import distance_outside
 
 TRUTH = Path(__file__).resolve().parents[2] / "data" / "sample" / "ground_truth.npz"
 KINDS = {"reprojection": slice(0, 32), "torso": slice(32, 32 + len(TORSO_PAIRS)),
          "hinge": slice(43, 43 + len(HINGES)), "below_floor": slice(47, 49), "contact": slice(49, 51),
-         "head": slice(51, 54), "twist": slice(54, 57)}
+         "head": slice(51, 54), "twist": slice(54, 57), "silhouette": slice(N_FRAME_RES, N_FRAME_RES + N_SIL - 4),
+         "support": slice(N_FRAME_RES + N_SIL - 4, N_FRAME_RES + N_SIL - 3), "away": slice(N_FRAME_RES + N_SIL - 3, N_FRAME_RES + N_SIL - 1),
+         "bottom": slice(N_FRAME_RES + N_SIL - 1, N_FRAME_RES + N_SIL)}
+
+
+def thin_silhouettes(uv: np.ndarray, scale: float = 0.5, shape=(240, 320)) -> SilhouetteField:
+    """Distance-outside fields of stick figures (bones 1 px wide at ``scale``) through the 2D joints ``uv``
+    ``(n, 16, 2)``: most of a turned limb's points fall outside them."""
+    import cv2
+
+    from tbha_graph.mocap.skeleton import PARENTS
+
+    fields = []
+    for q in np.round((uv + 0.5) * scale - 0.5).astype(int):
+        m = np.zeros(shape, np.uint8)
+        for j in range(1, 16):
+            cv2.line(m, tuple(q[PARENTS[j]]), tuple(q[j]), 255, 1)
+        fields.append(distance_outside(m))
+    bottom = uv[:, [12, 15], 1].max(axis=1) + 25.0  # the lowest row 25 px below the lower ankle: the bottom term active
+    bottom[::4] = np.nan  # and unknown on some frames
+    return SilhouetteField(np.stack(fields), scale, np.arange(len(fields)), bottom)
 
 
 def test_analytic_frame_jacobian_equals_central_differences():
@@ -32,23 +55,37 @@ def test_analytic_frame_jacobian_equals_central_differences():
     uv[::5, 6] += 40.0  # outliers: the soft-L1 part
     weight = np.ones(uv.shape[:2])
     weight[::3, 9] = 0.0  # untracked points
+    weight[1::2, 4:] = 0.0  # limbs untracked on every other frame: the silhouette's term applies to their points
     contact = contacts_from_image(uv, weight > 0, fps)
     contact[::2] = True
-    data = TakeData(uv, weight, L, centre, fps, 0.08, contact, rest_pair_distances(L, 0.08))
+    joints_uv = 700.0 * P[..., :2] / P[..., 2:3] + centre
+    data = TakeData(uv, weight, L, centre, fps, 0.08, contact, rest_pair_distances(L, 0.08),
+                    silhouette=thin_silhouettes(joints_uv), away=np.arange(n) % 2 == 0)
     nf, d = R[:, 1], float(-R[:, 1] @ t)
-    prob = TakeProblem(data, bone_directions(P), nf, Weights(sigma_twist=0.2), DEFAULT_POINT_OFFSETS.copy(), free_offsets=False)
+    prob = TakeProblem(data, bone_directions(P), nf, Weights(sigma_twist=0.2, support_band=-0.03), DEFAULT_POINT_OFFSETS.copy(), free_offsets=False)
     g = np.array([np.log(700.0), 0.0, 0.0, d - 0.04])  # the floor 4 cm up: some ankles below it
     fr = pack_initial(P, prob.ref).reshape(n, PER_FRAME)
     fr[:, 3:] += rng.normal(scale=0.35, size=(n, PER_FRAME - 3))  # bones turned ~20 degrees: hinges bent wrongly
     h = 1e-6
-    num = np.empty((n, N_FRAME_RES, PER_FRAME))
+    F = prob.n_frame_res
+    assert F == N_FRAME_RES + N_SIL
+    num = np.empty((n, F, PER_FRAME))
     for i in range(PER_FRAME):
         fp, fm = fr.copy(), fr.copy()
         fp[:, i] += h
         fm[:, i] -= h
         num[:, :, i] = (prob.frame_terms(prob.joints_from_frames(fp), g) - prob.frame_terms(prob.joints_from_frames(fm), g)) / (2 * h)
     Pj = prob.joints_from_frames(fr)
-    ana = residual_jacobian(prob, Pj, g).reshape(n, N_FRAME_RES, 48) @ joint_jacobian(prob, fr, L).reshape(n, 48, PER_FRAME)
+    ana = residual_jacobian(prob, Pj, g).reshape(n, F, 48) @ joint_jacobian(prob, fr, L).reshape(n, 48, PER_FRAME)
+    sil = prob.frame_terms(Pj, g)[:, KINDS["silhouette"]]
+    assert (sil[1::2] > 0).mean() > 0.3 and (sil > 2.0 * prob.w.robust_scale).any()  # outside, some beyond the soft-L1 scale
+    assert not sil[::2, [0, 1, 2]].any()  # tracked joints (hips, chest, neck): the reprojection places them, not the silhouette
+    support = prob.frame_terms(Pj, g)[:, KINDS["support"]]
+    assert 0.2 < (support > 0).mean() < 0.9  # the support band crossed in this take
+    away = prob.frame_terms(Pj, g)[:, KINDS["away"]]
+    assert (away[::2] > 0).mean() > 0.5 and not away[1::2].any()  # the sample faces the camera: active where flagged
+    bottom = prob.frame_terms(Pj, g)[:, KINDS["bottom"]]
+    assert (bottom > 0).mean() > 0.3 and not bottom[::4].any()  # measured 0.43
     for kind, rows in KINDS.items():
         a, b = ana[:, rows], num[:, rows]
         assert np.abs(b).max() > 0.1, f"{kind}: not active in this test"

@@ -45,6 +45,16 @@ twist prior (the pelvis faces where the thorax faces, ``sigma_twist`` about 11 d
    A take longer than ``window_frames`` (300) finds its camera and floor on every k-th frame (at most 300),
    then solves the pose in overlapping windows of 300 frames with them held (:func:`solve_windows`): memory
    stays that of one window and time grows linearly (``bench/solver_speed.py``).
+   **Silhouette** (optional ``silhouette`` input, ``segment.silhouette``; used in the pose solves at the chosen focal length only, so the
+   focal length is chosen as without it): the suit's patches are on the body's front, so with the actor's
+   back to the camera only the head is tracked and the priors alone placed the body (measured: it drifted
+   0.5-1.5 m in depth and kept facing sideways). With the silhouette four more residuals per frame
+   (:func:`.take_model.sil_residuals`, :func:`.take_model.bottom_residual`): every joint and bone midpoint not
+   pinned by tracked points projected inside the outline (``sigma_sil``; on tracked ones the silhouette's small
+   defects only pulled: the hop given its focal length 48 -> 52 mm); the floor point below the lower ankle at
+   most 8 px higher in the image than the outline's lowest row (else a body farther away and smaller, its head
+   on the same pixel, fits inside as well); the lower ankle within 0.1 m of its standing height; and on frames where the head is tracked but
+   no torso patch is, the thorax and pelvis facing at least 120 degrees away from the camera.
 5. **World frame.** y up = the floor normal, origin on the floor below the hips on the first frame, z the
    actor's forward on the first frame made horizontal (the actor faces +z in the T-pose).
 
@@ -66,10 +76,10 @@ from ...core.node import node, optional
 from ..bundles.tracks import read_tracks
 from ..calibrate.pnp import solve_pnp_planar
 from ..camera import Camera
-from ..ports import BODY, CAMERA, MOTION, SIDES, TRACKS2D, report_port
+from ..ports import BODY, CAMERA, MOTION, SIDES, SILHOUETTE, TRACKS2D, report_port
 from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS
 from ..body import DEFAULT_ANKLE_HEIGHT, body_lengths, lengths_to_body, tpose_on_floor
-from .take_model import (ANKLES, DEFAULT_POINT_OFFSETS, TORSO_PAIRS, TakeData, TakeProblem, Weights,
+from .take_model import (ANKLES, DEFAULT_POINT_OFFSETS, TORSO_JOINTS, TORSO_PAIRS, SilhouetteField, TakeData, TakeProblem, Weights,
                          bone_directions, fronts, pack_initial, point_positions, unit)
 from .take_solver import levenberg_marquardt
 from .take_solver import search_sides_lm as search_sides
@@ -110,6 +120,9 @@ class SolveTakeParams(BaseModel):
     window_overlap: int = Field(30, ge=6, description="frames two neighbouring windows share (cross-faded)")
     cross_seed: bool = Field(True, description="re-solve the best start's depth sides at the other starts' focal lengths, "
                              "to warn when the take does not determine the focal length (never changes the choice)")
+    sigma_sil: float = Field(4.0, gt=0, description="with a silhouette input: a joint or bone midpoint projected outside "
+                             "the actor's silhouette, beyond 2 px, costs (distance / sigma_sil)² (soft-L1 beyond 2 sigmas)",
+                             json_schema_extra={"unit": "px"})
 
 
 def tpose_camera(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarray, f: float, centre: np.ndarray,
@@ -261,10 +274,20 @@ def first_skeleton(points, tracked, lengths, f, centre, width, height, fps, p: S
     return P, cam
 
 
+def facing_away(weight: np.ndarray) -> np.ndarray:
+    """Frames ``(n,)`` where the head's point is tracked but none of the torso's (weights ``(n, 16)``): the suit's
+    patches are on the body's front, so there the torso faces away from the camera."""
+    from ..skeleton import JOINT_INDEX
+
+    return (weight[:, TORSO_JOINTS] <= 0).all(axis=1) & (weight[:, JOINT_INDEX["head"]] > 0)
+
+
 def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: SolveTakeParams, free_offsets: bool,
-                 focal_prior=None, contact=None, held_globals: np.ndarray | None = None) -> tuple[TakeProblem, float]:
+                 focal_prior=None, contact=None, held_globals: np.ndarray | None = None,
+                 silhouette: SilhouetteField | None = None) -> tuple[TakeProblem, float]:
     """A :class:`TakeProblem` around joints ``P`` and a floor ``(normal (3,), offset)`` (or a camera whose world
-    y is up); contacts detected from ``P`` unless given. Returns the problem and the floor offset."""
+    y is up); contacts detected from ``P`` unless given; the actor's ``silhouette`` on these frames, if any.
+    Returns the problem and the floor offset."""
     if isinstance(cam_or_floor, Camera):
         nf, d = cam_or_floor.R[:, 1], float(-cam_or_floor.R[:, 1] @ cam_or_floor.t)
     else:
@@ -273,21 +296,24 @@ def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: Solve
         contact = detect_contacts(P, nf, d, fps, p.ankle_height)
     contact = np.asarray(contact, dtype=bool)
     data = TakeData(points, weight, lengths, centre, fps, p.ankle_height, contact,
-                    rest_pair_distances(lengths, p.ankle_height))
-    w = Weights(sigma_px=p.sigma_px, sigma_acc=p.sigma_acc, sigma_twist=p.sigma_twist, sigma_acc_torso=p.sigma_acc_torso)
+                    rest_pair_distances(lengths, p.ankle_height), silhouette=silhouette,
+                    away=None if silhouette is None else facing_away(weight))
+    w = Weights(sigma_px=p.sigma_px, sigma_acc=p.sigma_acc, sigma_twist=p.sigma_twist, sigma_acc_torso=p.sigma_acc_torso,
+                sigma_sil=p.sigma_sil)
     offsets = point_offsets_of(p)
     return TakeProblem(data, bone_directions(P), nf, w, offsets, fixed_globals=held_globals, free_offsets=free_offsets,
                        focal_prior=focal_prior, free_lengths=p.free_lengths), d
 
 
 def solve_frames(points, weight, lengths, centre, fps, P0, floor, g_start, p, iterations, free_offsets, focal_prior,
-                 side_search: bool, contact: np.ndarray | None = None, hold_globals: bool = False, tol: float = 1e-5):
+                 side_search: bool, contact: np.ndarray | None = None, hold_globals: bool = False, tol: float = 1e-5,
+                 silhouette: SilhouetteField | None = None):
     """Whole-take solve from joints ``P0``: LM, then (optionally) the depth-side search and LM again; the globals
-    ``g_start`` held when ``hold_globals`` (a window of a long take: camera and floor known).
-    Returns ``(problem, x, cost, normal equations, flips kept)``."""
+    ``g_start`` held when ``hold_globals`` (a window of a long take: camera and floor known); the actor's
+    ``silhouette`` on these frames, if any. Returns ``(problem, x, cost, normal equations, flips kept)``."""
     def start(P, fl, g):
         prob, _ = make_problem(points, weight, lengths, centre, fps, P, fl, p, free_offsets, focal_prior, contact,
-                               g if hold_globals else None)
+                               g if hold_globals else None, silhouette)
         x = pack_initial(P, prob.ref)
         return prob, (x if hold_globals else np.concatenate([g, x]))
 
@@ -316,14 +342,15 @@ def joints_from_directions(root: np.ndarray, dirs: np.ndarray, lengths: np.ndarr
 
 
 def solve_windows(points, weight, lengths, centre, fps, P0, floor, g, p: SolveTakeParams, contact,
-                  window: int, overlap: int, progress=None) -> tuple[np.ndarray, int, int]:
+                  window: int, overlap: int, progress=None,
+                  silhouette: SilhouetteField | None = None) -> tuple[np.ndarray, int, int]:
     """The final solve of a long take in overlapping windows of ``window`` frames, camera and floor held
     (globals ``g``, floor ``(normal, offset)``): LM, the depth-side search, LM on each window in turn, started
     from ``P0`` ``(n, 16, 3)`` with its first ``overlap`` frames from the previous window's solution (so depth
     sides carry on), which it replaces over the overlap by a linear cross-fade of root positions and bone
-    directions. Memory is that of one window; time is linear in the frames. Returns joints ``(n, 16, 3)``
-    (camera frame, metres), the mirrors kept and the number of windows; ``progress`` (optional) wraps the
-    windows' iterable as ``ctx.progress`` does."""
+    directions (the actor's ``silhouette``, if any, on each window's frames). Memory is that of one window;
+    time is linear in the frames. Returns joints ``(n, 16, 3)`` (camera frame, metres), the mirrors kept and the
+    number of windows; ``progress`` (optional) wraps the windows' iterable as ``ctx.progress`` does."""
     n = P0.shape[0]
     P = P0.copy()
     L = np.linalg.norm(P0[0, 1:] - P0[0, PARENTS[1:]], axis=-1)
@@ -340,7 +367,7 @@ def solve_windows(points, weight, lengths, centre, fps, P0, floor, g, p: SolveTa
         rows = slice(a, b)
         prob, x, _, _, k = solve_frames(points[rows], weight[rows], lengths, centre, fps, P[rows], floor, g, p,
                                         p.max_iterations, False, None, p.side_search, contact[rows], hold_globals=True,
-                                        tol=POSE_TOL)
+                                        tol=POSE_TOL, silhouette=None if silhouette is None else silhouette.subset(rows))
         kept += k
         Pw = prob.solution(x)[4]
         lo = prev_end - a
@@ -397,9 +424,11 @@ def world_frame(P: np.ndarray, nf: np.ndarray, d: float) -> tuple[np.ndarray, np
 
 
 def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarray, width: int, height: int,
-                      fps: float, p: SolveTakeParams, progress=None, confidence: np.ndarray | None = None) -> dict:
+                      fps: float, p: SolveTakeParams, progress=None, confidence: np.ndarray | None = None,
+                      silhouette: SilhouetteField | None = None) -> dict:
     """The whole solve (see the module docstring) on 2D points ``(n, 16, 2)`` px; ``progress`` (optional, as
-    ``ctx.progress``: wraps an iterable) shows the starts and the pose windows. Returns a dict with
+    ``ctx.progress``: wraps an iterable) shows the starts and the pose windows; ``silhouette`` (optional) the
+    actor's outline on every frame. Returns a dict with
     ``joints`` (n, 16, 3) world metres, ``camera`` (:class:`Camera`), ``sides`` (n, 16) int8, ``report``.
 
     BLAS runs on one thread meanwhile: the solver's matrices are small (33 x 33 frame blocks, a band of 99),
@@ -409,10 +438,10 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(limits=1, user_api="blas"):
-        return _solve_take(points, tracked, lengths, width, height, fps, p, progress, confidence)
+        return _solve_take(points, tracked, lengths, width, height, fps, p, progress, confidence, silhouette)
 
 
-def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams, progress, confidence) -> dict:
+def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams, progress, confidence, sil) -> dict:
     t0 = time.perf_counter()
     n = points.shape[0]
     centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
@@ -501,13 +530,13 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
         g_s = np.concatenate([[np.log(f_sel), 0.0, 0.0, d_s], prob.globals_of(x)[4:]])
         prob, x, cost, ne, kept2 = solve_frames(points, weight, lengths, centre, fps, P_s, (nf_s, d_s), g_s, p,
                                                 p.max_iterations, False, (f_sel, 1e-4), p.side_search, contact,
-                                                tol=POSE_TOL)
+                                                tol=POSE_TOL, silhouette=sil)
     elif not whole:  # the same in windows, camera and floor held
         f_sel, nf_s, d_s, _, P_s = prob.solution(x)
         g_s = np.concatenate([[np.log(f_sel), 0.0, 0.0, d_s], prob.globals_of(x)[4:]])
         P_w, kept2, report["windows"] = solve_windows(points, weight, lengths, centre, fps, interpolate_joints(P_s, cam_rows, n),
-                                   (nf_s, d_s), g_s, p, contact, p.window_frames, p.window_overlap, progress)
-        prob, _ = make_problem(points, weight, lengths, centre, fps, P_w, (nf_s, d_s), p, False, None, contact, g_s)
+                                   (nf_s, d_s), g_s, p, contact, p.window_frames, p.window_overlap, progress, sil)
+        prob, _ = make_problem(points, weight, lengths, centre, fps, P_w, (nf_s, d_s), p, False, None, contact, g_s, sil)
         x = pack_initial(P_w, prob.ref)
     f, nf, d, offs, P = prob.solution(x)
     terms = prob.term_costs(x)
@@ -549,7 +578,9 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
 @node(
     "reconstruct.solve_take",
     version=1,
-    inputs={"tracks": TRACKS2D, "body": optional(BODY, "bone lengths; defaults if absent")},
+    inputs={"tracks": TRACKS2D, "body": optional(BODY, "bone lengths; defaults if absent"),
+            "silhouette": optional(SILHOUETTE, "the actor's silhouette per frame (segment.silhouette): joints kept inside "
+                                   "it, the lower foot on the floor, the torso facing away where no torso patch is seen")},
     outputs={
         "motion": MOTION,
         "camera": CAMERA,
@@ -558,7 +589,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
     },
     params=SolveTakeParams,
 )
-def solve_take(ctx, tracks, body):
+def solve_take(ctx, tracks, body, silhouette=None):
     """Camera (focal, pose above the floor) and motion estimated together from the whole take's 2D tracks."""
     p: SolveTakeParams = ctx.params
     tr = read_tracks(tracks)
@@ -575,8 +606,17 @@ def solve_take(ctx, tracks, body):
     if p.confidence_power > 0 and confidence is None:
         ctx.warn("confidence_power is set but the tracks carry no confidence: every tracked point weighs the same "
                  "(detectors such as detect.mediapipe_pose give one; suit trackers do not)")
+    sil = None
+    if silhouette is not None:
+        dist = np.asarray(silhouette["distance"])
+        if dist.shape[0] != tr.n_frames:
+            raise NodeError(f"the silhouette has {dist.shape[0]} frames, the tracks {tr.n_frames}",
+                            hint="connect the silhouette made from the same video as the tracks")
+        bottom = silhouette.get("bottom_px")
+        sil = SilhouetteField(dist, float(silhouette["scale"]), np.arange(tr.n_frames),
+                              None if bottom is None else np.asarray(bottom, dtype=np.float64))
     out = solve_take_arrays(tr.points, tr.tracked, lengths, tr.width, tr.height, float(tr.fps), p,
-                            progress=ctx.progress, confidence=confidence)
+                            progress=ctx.progress, confidence=confidence, silhouette=sil)
     rep = out["report"]
     ctx.log(f"focal {rep['focal_px']:.0f} px (± {rep['focal_sd_pct']:.1f} %), camera {rep['camera_height_m']:.2f} m high, "
             f"{rep['camera_distance_m']:.2f} m away, tilt {rep['camera_tilt_deg']:.1f}°; {rep['solve_seconds']:.1f} s")

@@ -19,7 +19,8 @@ import numpy as np
 
 from ..skeleton import N_JOINTS, PARENTS
 from .take_model import (ANKLES, AXIS_TRIPLES, HINGES, J, N_BONES, N_FRAME_RES, PELVIS_JOINTS, PELVIS_SIDE, PER_FRAME,
-                         THORAX_JOINTS, TORSO_PAIRS, TakeProblem, unit)
+                         SIL_PAIRS, THORAX_JOINTS, TORSO_PAIRS, TakeProblem, bottom_residual, sil_residuals, unit,
+                         unseen_points)
 
 _EYE = np.eye(3)
 
@@ -80,12 +81,12 @@ def joint_jacobian(prob: TakeProblem, fr: np.ndarray, L: np.ndarray) -> np.ndarr
 
 def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: dict | None = None,
                       rows: slice = slice(None)) -> np.ndarray:
-    """``dR/dP`` ``(n, N_FRAME_RES, 16, 3)`` of :meth:`.take_model.TakeProblem.frame_terms` at joints ``P``
+    """``dR/dP`` ``(n, prob.n_frame_res, 16, 3)`` of :meth:`.take_model.TakeProblem.frame_terms` at joints ``P``
     ``(n, 16, 3)`` (the take's frames ``rows``: a chunk of it) under globals ``g``; ``parts`` (a dict, if
     given) receives the reprojection's pieces that :func:`global_jacobian` reuses."""
     w, d = prob.w, prob.d
     n = P.shape[0]
-    out = np.zeros((n, N_FRAME_RES, N_JOINTS, 3))
+    out = np.zeros((n, prob.n_frame_res, N_JOINTS, 3))
     thorax, d_thorax = front_jacobian(P, THORAX_JOINTS)
     pelvis, d_pelvis = front_jacobian(P, PELVIS_JOINTS)
     row = 2 * N_JOINTS
@@ -133,7 +134,70 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
         out[:, row:row + 3, jj] += Dj / w.sigma_twist
     for jj, Dj in zip(THORAX_JOINTS, d_thorax):
         out[:, row:row + 3, jj] -= Dj / w.sigma_twist
+    row += 3
+    if d.silhouette is not None:
+        sil = _silhouette(prob, P, g, rows)
+        for k, (a, b) in enumerate(SIL_PAIRS):
+            out[:, row + k, a] += sil["dX"][:, k] * (1.0 if a == b else 0.5)
+            if a != b:
+                out[:, row + k, b] += sil["dX"][:, k] * 0.5
+        row += len(SIL_PAIRS)  # support: the lower ankle's height above its band
+        low = np.argmin(h, axis=1)
+        act = (np.min(h, axis=1) > w.support_band)[:, None] * nf / w.sigma_support
+        for k, a in enumerate(ANKLES):
+            out[:, row, a] = act * (low == k)[:, None]
+        row += 1  # facing away: max(front . to_camera, 0) on the frames flagged away
+        away = np.zeros(n, bool) if d.away is None else np.asarray(d.away, dtype=bool)[rows]
+        for k, (fr, dfr, fj, at) in enumerate(((thorax, d_thorax, THORAX_JOINTS, J["chest"]),
+                                                (pelvis, d_pelvis, PELVIS_JOINTS, J["hips"]))):
+            c, C = unit_jacobian(P[:, at])
+            c, C = -c, -C
+            on = (away & (np.sum(fr * c, axis=-1) + w.away_cos > 0.0))[:, None] / w.sigma_away
+            for jj, Dj in zip(fj, dfr):
+                out[:, row + k, jj] += (c[:, None, :] @ Dj)[:, 0] * on
+            out[:, row + k, at] += (fr[:, None, :] @ C)[:, 0] * on
+        row += 2  # the silhouette's bottom reached: d/dP_a of -rho(b - v(S(P_a)))
+        bot = _bottom(prob, P, g, rows)
+        proj = _EYE - nf[:, None] * nf[None, :]  # dS / dP_a
+        for k, a in enumerate(ANKLES):
+            out[:, row, a] += (bot["dr_dS"] @ proj) * (bot["k"] == k)[:, None]
+        if parts is not None:
+            parts["bottom"] = np.concatenate([bot["dr_dS"], bot["dlogf"][:, None], bot["A"]], axis=1)
+        if parts is not None:
+            parts["sil_dlogf"] = sil["dlogf"]
     return out
+
+
+def _bottom(prob: TakeProblem, P: np.ndarray, g: np.ndarray, rows: slice) -> dict:
+    """The bottom residual's (:func:`.take_model.bottom_residual`) derivative by its floor point ``dr_dS``
+    ``(n, 3)``, by ``log f`` ``dlogf`` ``(n,)``, the lower ankle ``k`` ``(n,)`` and its position ``A`` ``(n, 3)``."""
+    w, d = prob.w, prob.d
+    f = np.exp(g[0])
+    nf, dfl = prob.floor(g)
+    _, pc = bottom_residual(P, f, d.centre, nf, dfl, d.silhouette, w, rows)
+    S, k = pc["S"], pc["k"]
+    zc = S[:, 2]
+    z = np.maximum(zc, 1e-3)
+    dv = np.stack([np.zeros_like(z), f / z, -f * S[:, 1] / z ** 2 * (zc >= 1e-3)], axis=1)  # d v / d S
+    dr = -pc["drho"][:, None] * dv
+    return {"dr_dS": dr, "dlogf": -pc["drho"] * f * S[:, 1] / z, "k": k, "A": P[:, ANKLES][np.arange(P.shape[0]), k]}
+
+
+def _silhouette(prob: TakeProblem, P: np.ndarray, g: np.ndarray, rows: slice) -> dict:
+    """The silhouette residuals' derivatives by their points ``dX`` ``(n, N_SIL, 3)`` (a point is the mean of its
+    two joints of :data:`.take_model.SIL_PAIRS`) and by ``log f`` ``dlogf`` ``(n, N_SIL)``: the field's image
+    gradient times the pinhole projection's derivative, times the soft-L1's, over ``sigma_sil``."""
+    w, d = prob.w, prob.d
+    f = np.exp(g[0])
+    _, pc = sil_residuals(P, f, d.centre, d.silhouette, w, rows, mask=unseen_points(d.weight[rows]))
+    X = pc["X"]
+    zc = X[..., 2]
+    z = np.maximum(zc, 1e-3)
+    k = (pc["drho"] / w.sigma_sil)[..., None] * pc["grad"]  # d r / d (u, v), (n, N_SIL, 2)
+    dX = np.empty(X.shape)
+    dX[..., :2] = k * (f / z)[..., None]
+    dX[..., 2] = -np.sum(k * f * X[..., :2], axis=-1) / z ** 2 * (zc >= 1e-3)
+    return {"dX": dX, "dlogf": np.sum(k * f * X[..., :2] / z[..., None], axis=-1)}
 
 
 def _reprojection(prob: TakeProblem, P, g, thorax, d_thorax, pelvis, d_pelvis, out: np.ndarray, rows: slice) -> dict:
@@ -215,7 +279,7 @@ def global_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: dict
     ``P`` ``(n, 16, 3)`` joints, ``parts`` from :func:`residual_jacobian`; with free lengths
     ``frame_by_lengths`` ``(n, F, 15)`` = ``dR/dP`` times :func:`length_jacobian` (the caller has ``dR/dP``)."""
     w, d, lay = prob.w, prob.d, prob.layout
-    n, F, G = P.shape[0], N_FRAME_RES, prob.n_glob
+    n, F, G = P.shape[0], prob.n_frame_res, prob.n_glob
     n_acc = max(n - 2, 0)
     Jf = np.zeros((n, F, G))
     Ja = np.zeros((n_acc, N_JOINTS * 3, G))
@@ -223,6 +287,8 @@ def global_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: dict
     Jp = []
     # focal: the image scales about the centre
     Jf[:, : 2 * N_JOINTS, 0] = parts["dlogf"].reshape(n, -1)
+    if "sil_dlogf" in parts:  # the silhouette's points scale about the centre too; the support moves with the floor
+        Jf[:, N_FRAME_RES:N_FRAME_RES + len(SIL_PAIRS), 0] = parts["sil_dlogf"]
     # floor: ankle heights h = P_a . nf + d and the slides' horizontal projection
     f1 = unit_jacobian(prob.n_ref + g[1] * prob.f1 + g[2] * prob.f2)[1] @ np.stack([prob.f1, prob.f2], axis=1)  # (3, 2)
     nf, dfl = prob.floor(g)
@@ -233,6 +299,19 @@ def global_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: dict
     row = 2 * N_JOINTS + len(TORSO_PAIRS) + len(HINGES)
     Jf[:, row:row + 2, 1:4] = below[..., None] * dh
     Jf[:, row + 2:row + 4, 1:4] = above[..., None] * dh
+    if d.silhouette is not None:
+        low = np.argmin(h, axis=1)
+        act = (np.min(h, axis=1) > w.support_band) / w.sigma_support
+        Jf[:, N_FRAME_RES + len(SIL_PAIRS), 1:4] = act[:, None] * dh[np.arange(n), low]
+        # bottom: S = A - (A.n + d) n; dS/d(g1, g2) = -(n A^T + (A.n + d) I) dn/d(g1, g2), dS/dd = -n
+        bt = parts["bottom"]
+        dr_dS, dlf, A = bt[:, :3], bt[:, 3], bt[:, 4:]
+        hA = A @ nf + dfl
+        dSdn = -(nf[None, :, None] * A[:, None, :] + hA[:, None, None] * _EYE)  # (n, 3, 3)
+        col = F - 1
+        Jf[:, col, 0] = dlf
+        Jf[:, col, 1:3] = ((dr_dS[:, None, :] @ dSdn)[:, 0]) @ f1
+        Jf[:, col, 3] = -(dr_dS @ nf)
     step, both = prob.slide_vectors(P, nf)
     u = np.where(both[..., None], step / np.maximum(np.linalg.norm(step, axis=-1, keepdims=True), 1e-9), 0.0)
     s_raw = np.zeros_like(step)

@@ -149,6 +149,18 @@ class TakeData:
     #: ``(n,)`` bool or None: True where a new, independent segment starts (no acceleration or slide term
     #: links frame t to the frames before it); lets many separate windows be solved as one problem
     breaks: np.ndarray | None = None
+    #: the actor's silhouette (:class:`SilhouetteField`, its ``index`` one row per frame here) or None: no term
+    silhouette: "SilhouetteField | None" = None
+    #: ``(n,)`` bool or None: frames where the actor is seen (head tracked) but none of the torso's patches is —
+    #: the suit's patches are on the body's front, so the torso faces away (used with a silhouette only)
+    away: np.ndarray | None = None
+
+    def subset(self, rows, breaks: np.ndarray | None = None) -> "TakeData":
+        """The data of the frames ``rows`` (slice or index array), with ``breaks`` for them."""
+        return TakeData(self.points[rows], self.weight[rows], self.lengths, self.centre, self.fps, self.ankle_height,
+                        self.contact[rows], self.rest_pairs, breaks=breaks,
+                        silhouette=None if self.silhouette is None else self.silhouette.subset(rows),
+                        away=None if self.away is None else np.asarray(self.away)[rows])
 
     def acc_mask(self) -> np.ndarray:
         """``(n - 2,)`` 1.0 where the acceleration term of frames (t, t+1, t+2) lies inside one segment."""
@@ -176,6 +188,16 @@ class Weights:
     contact_band: float = 0.03   # a planted ankle may rise this far above its standing height (heel and toe roll), metres
     sigma_offset: float = 0.03   # point offsets around their defaults, metres
     robust_scale: float = 2.0    # reprojection residuals beyond this many sigmas count as soft-L1 (outliers)
+    sigma_sil: float = 4.0       # a joint or bone midpoint outside the actor's silhouette, pixels
+    sil_tolerance: float = 2.0   # ... beyond this many pixels (the silhouette's edge is this uncertain)
+    sigma_support: float = 0.05  # with a silhouette: the lower ankle above its standing height by more than
+    support_band: float = 0.10   # this (metres) costs (excess / sigma_support)²: someone walking or turning stands on a foot
+    sigma_away: float = 0.2      # with a silhouette, on frames flagged ``away``: the torso's front turned towards the
+    #                              camera (cosine with the direction to it above -away_cos) costs ((cosine + away_cos) / sigma_away)²
+    away_cos: float = 0.5        # (0.5: the front at least 120 degrees from the camera, where no front patch is seen)
+    sigma_bottom: float = 4.0    # with a silhouette: the floor below the lower ankle seen above the silhouette's lowest row
+    bottom_tolerance: float = 8.0  # by more than this (pixels) costs (excess / sigma_bottom)², soft-L1 beyond robust_scale
+    #                                (the toe, nearer the camera than the ankle, is lower in the image: 3-9 px on the renders)
 
 
 def robust(r: np.ndarray, c: float) -> np.ndarray:
@@ -183,6 +205,115 @@ def robust(r: np.ndarray, c: float) -> np.ndarray:
     ``r``, linear beyond ``c``): the robust loss applied to reprojection only, not to the priors."""
     z = (r / c) ** 2
     return np.sign(r) * c * np.sqrt(2.0 * (np.sqrt(1.0 + z) - 1.0))
+
+
+#: Points kept inside the actor's silhouette (:class:`SilhouetteField`): every joint centre, then every
+#: bone's midpoint, as ``(a, b)`` joint pairs whose mean is the point (``a == b``: the joint itself).
+SIL_PAIRS = np.array([(j, j) for j in range(N_JOINTS)] + [(int(PARENTS[j]), j) for j in range(1, N_JOINTS)])
+#: Silhouette residuals per frame: the points of :data:`SIL_PAIRS`, the support (the lower ankle on the floor),
+#: the thorax's and the pelvis's facing on frames where the actor is seen but no torso patch is, then the
+#: silhouette's bottom reached (the floor below the lower ankle seen no higher than the silhouette's lowest row).
+N_SIL = len(SIL_PAIRS) + 1 + 2 + 1
+
+
+@dataclass
+class SilhouetteField:
+    """The actor's silhouette per frame as a distance-outside field (``segment.silhouette``): ``distance``
+    ``(m, H', W')`` uint8 in pixels of the field (``scale`` x the frame's resolution; 0 inside the
+    silhouette), ``index`` ``(n,)`` the field's row for each frame of the take (or window) being solved."""
+
+    distance: np.ndarray
+    scale: float
+    index: np.ndarray
+    #: ``(m,)`` the image row (full-resolution px, y down) of each field's lowest silhouette pixel, NaN if none
+    bottom: np.ndarray | None = None
+
+    def subset(self, rows) -> "SilhouetteField":
+        """The same field for the frames ``rows`` of this take (slice or index array)."""
+        return SilhouetteField(self.distance, self.scale, np.asarray(self.index)[rows], self.bottom)
+
+    def bottom_rows(self, rows=slice(None)) -> np.ndarray:
+        """``(k,)`` the silhouette's lowest row on the frames ``rows`` (NaN where unknown)."""
+        idx = np.asarray(self.index)[rows]
+        return np.full(idx.shape, np.nan) if self.bottom is None else np.asarray(self.bottom, dtype=np.float64)[idx]
+
+    def sample(self, uv: np.ndarray, rows=slice(None)) -> tuple[np.ndarray, np.ndarray]:
+        """Distance outside the silhouette ``(k, p)`` full-resolution px at image points ``uv`` ``(k, p, 2)`` px
+        on the frames ``rows`` (k of them), bilinear, and its gradient ``(k, p, 2)`` (px per px). Points
+        beyond the image take the border's value (zero gradient across the border)."""
+        D = self.distance
+        h, w = D.shape[1:]
+        idx = np.asarray(self.index)[rows][:, None]
+        x = (uv[..., 0] + 0.5) * self.scale - 0.5
+        y = (uv[..., 1] + 0.5) * self.scale - 0.5
+        inx = (x > 0.0) & (x < w - 1)
+        iny = (y > 0.0) & (y < h - 1)
+        x = np.clip(np.nan_to_num(x), 0.0, w - 1.000001)
+        y = np.clip(np.nan_to_num(y), 0.0, h - 1.000001)
+        x0 = np.minimum(x.astype(np.intp), w - 2)
+        y0 = np.minimum(y.astype(np.intp), h - 2)
+        fx, fy = x - x0, y - y0
+        v00 = D[idx, y0, x0].astype(np.float64)
+        v01 = D[idx, y0, x0 + 1].astype(np.float64)
+        v10 = D[idx, y0 + 1, x0].astype(np.float64)
+        v11 = D[idx, y0 + 1, x0 + 1].astype(np.float64)
+        top = v00 + fx * (v01 - v00)
+        bot = v10 + fx * (v11 - v10)
+        val = (top + fy * (bot - top)) / self.scale
+        gx = ((v01 - v00) * (1.0 - fy) + (v11 - v10) * fy) * inx  # field px per field px = full px per full px
+        gy = (bot - top) * iny
+        return val, np.stack([gx, gy], axis=-1)
+
+
+def bottom_residual(P: np.ndarray, f: float, centre: np.ndarray, nf: np.ndarray, dfl: float, sil: SilhouetteField,
+                    w: "Weights", rows=slice(None)):
+    """The silhouette's bottom reached ``(n,)``: the floor point below each ankle (``S = P_a - (n·P_a + d) n``)
+    projected; the lower of the two in the image (row ``v``) should not be above the silhouette's lowest row
+    ``b`` by more than ``bottom_tolerance``: ``robust(max(b - v - tol, 0) / sigma_bottom)`` (0 where ``b`` is
+    unknown). Without it a body farther away and smaller (its head on the same pixel) fits inside the
+    silhouette as well. Returns the residuals and the pieces of the Jacobian (the lower ankle ``k`` ``(n,)``,
+    ``S`` ``(n, 3)`` its floor point, ``drho`` ``(n,)`` the soft-L1's derivative over ``sigma_bottom``)."""
+    A = P[:, ANKLES]  # (n, 2, 3)
+    S = A - (A @ nf + dfl)[..., None] * nf
+    z = np.maximum(S[..., 2], 1e-3)
+    v = f * S[..., 1] / z + centre[1]
+    k = np.argmax(v, axis=1)
+    n = P.shape[0]
+    b = sil.bottom_rows(rows)
+    e = np.where(np.isfinite(b), np.maximum(np.nan_to_num(b) - v[np.arange(n), k] - w.bottom_tolerance, 0.0), 0.0) / w.sigma_bottom
+    c = w.robust_scale
+    r = robust(e, c)
+    small = e < 1e-6 * c
+    drho = np.where(e <= 0.0, 0.0, np.where(small, 1.0, e / np.where(small, 1.0, np.sqrt(1.0 + (e / c) ** 2) * r)))
+    return r, {"k": k, "S": S[np.arange(n), k], "drho": drho / w.sigma_bottom}
+
+
+def unseen_points(weight: np.ndarray) -> np.ndarray:
+    """``(n, len(SIL_PAIRS))`` 1.0 for the silhouette's points not pinned by tracked points (weights ``(n, 16)``): a joint
+    not tracked, a bone midpoint with an end not tracked. Where both are tracked the reprojection places them."""
+    t = weight > 0
+    return (~(t[:, SIL_PAIRS[:, 0]] & t[:, SIL_PAIRS[:, 1]])).astype(np.float64)
+
+
+def sil_residuals(P: np.ndarray, f: float, centre: np.ndarray, sil: SilhouetteField, w: "Weights", rows=slice(None),
+                  mask: np.ndarray | None = None):
+    """Silhouette residuals ``(n, N_SIL)`` of joints ``P`` ``(n, 16, 3)`` camera frame at focal ``f``: each
+    point of :data:`SIL_PAIRS`, projected, by how far it lies outside the silhouette beyond
+    ``sil_tolerance`` px, over ``sigma_sil``, soft-L1 beyond ``robust_scale``, times ``mask`` ``(n, N)`` (the points
+    :func:`unseen_points`; all when None); with the pieces the Jacobian
+    needs (``drho`` ``(n, N_SIL)``, the field's gradient ``(n, N_SIL, 2)``, the points ``(n, N_SIL, 3)``)."""
+    X = 0.5 * (P[:, SIL_PAIRS[:, 0]] + P[:, SIL_PAIRS[:, 1]])
+    z = np.maximum(X[..., 2:3], 1e-3)
+    uv = f * X[..., :2] / z + centre
+    dist, grad = sil.sample(uv, rows)
+    e = np.maximum(dist - w.sil_tolerance, 0.0) / w.sigma_sil
+    if mask is not None:
+        e = e * mask
+    c = w.robust_scale
+    r = robust(e, c)
+    small = e < 1e-6 * c
+    drho = np.where(e <= 0.0, 0.0, np.where(small, 1.0, e / np.where(small, 1.0, np.sqrt(1.0 + (e / c) ** 2) * r)))
+    return r, {"drho": drho, "grad": grad, "X": X}
 
 
 @dataclass
@@ -208,7 +339,7 @@ class Layout:
 
 #: Residuals per frame that depend on that frame alone: reprojection (16 x 2), torso distances, hinges,
 #: ankle below the floor (2), planted ankle off the floor (2), pose prior (head along the neck, 3; pelvis
-#: facing where the thorax faces, 3).
+#: facing where the thorax faces, 3); with a silhouette, :data:`N_SIL` more (:attr:`TakeProblem.n_frame_res`).
 N_FRAME_RES = N_JOINTS * 2 + len(TORSO_PAIRS) + len(HINGES) + 4 + 6
 
 
@@ -219,7 +350,8 @@ class TakeProblem:
     :data:`PER_FRAME` values. Bone directions are tangent updates around ``ref`` ``(n, 15, 3)`` and the floor
     normal around ``n_ref`` ``(3,)``; :meth:`recentre` moves both references to the current solution.
 
-    Residual vector: per-frame block ``(n, N_FRAME_RES)`` (frame-major), then accelerations
+    Residual vector: per-frame block ``(n, n_frame_res)`` (frame-major; :data:`N_FRAME_RES`, plus :data:`N_SIL`
+    silhouette residuals at its end when the data has a silhouette), then accelerations
     ``(n - 2, 16 * 3)``, planted-ankle slides ``(n, 2)``, then global priors (point offsets, a known focal).
     """
 
@@ -233,6 +365,7 @@ class TakeProblem:
         self.fixed_globals = None if fixed_globals is None else np.asarray(fixed_globals, dtype=np.float64)
         self.focal_prior = focal_prior  # (focal px, sigma of log f): a known focal length held (nearly) fixed
         self.n_glob = 0 if fixed_globals is not None else self.layout.n_globals
+        self.n_frame_res = N_FRAME_RES + (N_SIL if data.silhouette is not None else 0)
         self.set_refs(ref, n_ref)
 
     def set_refs(self, ref: np.ndarray, n_ref: np.ndarray) -> None:
@@ -282,8 +415,8 @@ class TakeProblem:
 
     # --- residuals ---------------------------------------------------------------------------
     def frame_terms(self, P: np.ndarray, g: np.ndarray) -> np.ndarray:
-        """Per-frame residuals ``(..., n, N_FRAME_RES)`` of joints ``P`` ``(..., n, 16, 3)`` under globals ``g``
-        (any leading axes broadcast against the take's data)."""
+        """Per-frame residuals ``(..., n, n_frame_res)`` of joints ``P`` ``(..., n, 16, 3)`` under globals ``g``
+        (any leading axes broadcast against the take's data; the silhouette's term takes ``(n, 16, 3)`` only)."""
         w, d = self.w, self.d
         f = np.exp(g[0])
         nf, dfl = self.floor(g)
@@ -305,7 +438,16 @@ class TakeProblem:
         neck = P[..., J["neck"], :]
         head = (unit(P[..., J["head"], :] - neck) - unit(neck - P[..., J["chest"], :])) / w.sigma_pose
         twist = (pelvis - thorax) / w.sigma_twist
-        return np.concatenate([rep, torso, np.stack(hin, axis=-1), below, on, head, twist], axis=-1)
+        terms = [rep, torso, np.stack(hin, axis=-1), below, on, head, twist]
+        if d.silhouette is not None:  # the silhouette's points, and the support: with them the feet's image rows fix the depth
+            away = np.zeros(P.shape[0], bool) if d.away is None else np.asarray(d.away, dtype=bool)
+            to_cam = [-unit(P[..., J["chest"], :]), -unit(P[..., J["hips"], :])]
+            facing = [np.where(away, np.maximum(np.sum(fr * c, axis=-1) + w.away_cos, 0.0), 0.0) / w.sigma_away
+                      for fr, c in zip((thorax, pelvis), to_cam)]
+            terms += [sil_residuals(P, f, d.centre, d.silhouette, w, mask=unseen_points(d.weight))[0],
+                      np.maximum(h.min(axis=-1, keepdims=True) - w.support_band, 0.0) / w.sigma_support,
+                      np.stack(facing, axis=-1), bottom_residual(P, f, d.centre, nf, dfl, d.silhouette, w)[0][:, None]]
+        return np.concatenate(terms, axis=-1)
 
     def slide_vectors(self, P: np.ndarray, nf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Horizontal steps ``(n, 2, 3)`` of the ankles since the previous frame (0 on frame 0) and the mask
@@ -358,8 +500,8 @@ class TakeProblem:
         P = self.joints_from_frames(self.frames_of(x), self.lengths_of(g))
         F = self.frame_terms(P, g)
         acc, slide = self.coupled_terms(P, self.floor(g)[0])
-        k = np.cumsum([0, N_JOINTS * 2, len(TORSO_PAIRS), len(HINGES), 2, 2, 6])
-        names = ("reprojection", "torso", "hinge", "below_floor", "contact", "pose")
+        k = np.cumsum([0, N_JOINTS * 2, len(TORSO_PAIRS), len(HINGES), 2, 2, 6, self.n_frame_res - N_FRAME_RES])
+        names = ("reprojection", "torso", "hinge", "below_floor", "contact", "pose", "silhouette")
         out = {nm: 0.5 * float(np.sum(F[:, k[i]:k[i + 1]] ** 2)) for i, nm in enumerate(names)}
         out.update(acceleration=0.5 * float(np.sum(acc ** 2)), slide=0.5 * float(np.sum(slide ** 2)),
                    priors=0.5 * float(np.sum(self.global_terms(g) ** 2)))

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..skeleton import N_JOINTS, PARENTS
 from .take_jacobian import global_jacobian, joint_jacobian, length_jacobian, residual_jacobian
-from .take_model import (ANKLES, J, N_BONES, N_FRAME_RES, PER_FRAME, TakeData, TakeProblem, bone_directions,
+from .take_model import (ANKLES, J, N_BONES, PER_FRAME, TakeData, TakeProblem, bone_directions,
                          pack_initial, unit)
 
 #: Frames per chunk of the residuals-by-joints Jacobian in :func:`normal_equations` (bounds its memory)
@@ -120,7 +120,7 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray, r: np.ndarray | None = 
     Jacobians are analytic (:mod:`.take_jacobian`): the frame unknowns' per frame (a frame's own residuals depend
     on its own unknowns only), accelerations and slides by the chain rule through the joints' differences, and
     the globals' for the whole residual vector."""
-    n, G, F, m = prob.n, prob.n_glob, N_FRAME_RES, PER_FRAME
+    n, G, F, m = prob.n, prob.n_glob, prob.n_frame_res, PER_FRAME
     g = prob.globals_of(x)
     fr = prob.frames_of(x)
     L = prob.lengths_of(g)
@@ -352,8 +352,7 @@ def search_sides_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, iterations:
                 breaks.append(np.r_[True, np.zeros(hi - lo - 1, dtype=bool)])
         rows = np.concatenate(idx)
         Pst = np.concatenate(parts)
-        data = TakeData(d.points[rows], d.weight[rows], d.lengths, d.centre, d.fps, d.ankle_height, d.contact[rows],
-                        d.rest_pairs, breaks=np.concatenate(breaks))
+        data = d.subset(rows, breaks=np.concatenate(breaks))
         ref = bone_directions(Pst)
         wp = TakeProblem(data, ref, nf, prob.w, prob.offsets0, fixed_globals=g, free_offsets=prob.layout.free_offsets,
                          free_lengths=prob.layout.free_lengths)

@@ -1,0 +1,201 @@
+"""``segment.silhouette``: the actor's outline in every frame, whatever way they face.
+
+The suit's patches are on the body's front, so with the actor's back to the camera the tracker sees the
+head alone; the body's outline against the background is seen all the same. This node gives the whole-take
+solver (:mod:`..reconstruct.solve_take`) that outline as a **distance-outside field** per frame: for every
+pixel, how far (pixels) it lies outside the actor's silhouette (0 inside it).
+
+Method (the camera is still):
+
+1. **Background.** Frames sampled evenly over the take (``background_samples``), downscaled by ``scale``;
+   per pixel the median of the samples where the actor is not near that pixel — outside the box around that
+   frame's *tracked* points (at least the body's height tall, grown by ``track_margin`` of it; a lost point the
+   tracker holds may be stale). Where the actor is near in nearly every sample (fewer than
+   ``min_background_samples`` others; a turn or a hop on the spot) the background is painted in from the
+   known background around it (:func:`cv2.inpaint`, Telea).
+2. **Foreground.** Each frame streamed again (:func:`..io.video.iter_frames`; never the whole take held at
+   full resolution): a pixel is foreground where some colour channel differs from the background by more
+   than ``threshold`` (8-bit levels), unless it only got darker by a similar factor in every channel (a
+   shadow on the floor); an opening removes specks, a closing fills seams; regions smaller than
+   ``min_region`` of the largest one are dropped (noise, not the actor); holes inside the outline are filled.
+3. **Field.** :func:`cv2.distanceTransform` of the background (L2, 5x5 mask), at the reduced resolution,
+   stored as ``uint8`` in reduced pixels (saturating at 255).
+
+Output ``silhouette``: ``distance`` ``(n_frames, H', W')`` uint8 (reduced pixels outside the silhouette;
+full-resolution pixels = value / scale), ``scale`` (reduced / full size), ``area_px`` ``(n_frames,)`` the
+silhouette's area in full-resolution pixels², ``bottom_px`` ``(n_frames,)`` the image row (full-resolution px, y down) of
+its lowest pixel (the sole of the lower foot; NaN on an empty frame), ``background_known_pct``.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from ...core.errors import NodeError
+from ...core.node import node
+from ..bundles.tracks import read_tracks
+from ..io.video import iter_frames
+from ..ports import SILHOUETTE, TRACKS2D, VIDEO, VideoClip
+
+
+class SilhouetteParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    scale: float = Field(0.5, gt=0, le=1, description="the field's resolution as a fraction of the frame's")
+    background_samples: int = Field(64, ge=5, le=400, description="frames sampled evenly over the take for the background")
+    min_background_samples: int = Field(3, ge=1, description="fewest actor-free samples that give a pixel its background")
+    track_margin: float = Field(0.3, ge=0, le=2, description="where the actor may be: the box around a frame's tracked points, at least the body's height tall, grown by this fraction of the body's height")
+    threshold: float = Field(28.0, gt=0, le=255, description="largest channel difference from the background that is still background", json_schema_extra={"unit": "8-bit level"})
+    shadow_ratio: tuple[float, float] = Field((0.45, 0.97), description="a pixel darker than the background by a factor in this range in every channel, within shadow_spread of each other, is a shadow (background)")
+    shadow_spread: float = Field(0.08, ge=0, le=1, description="largest spread of the three channels' darkening factors in a shadow")
+    open_px: int = Field(3, ge=1, le=15, description="opening kernel (reduced pixels): specks removed")
+    close_px: int = Field(5, ge=1, le=31, description="closing kernel (reduced pixels): seams filled")
+    min_region: float = Field(0.05, ge=0, le=1, description="regions smaller than this fraction of the largest are dropped")
+
+
+def _small(frame: np.ndarray, scale: float) -> np.ndarray:
+    if scale >= 1.0:
+        return frame
+    h, w = frame.shape[:2]
+    return cv2.resize(frame, (max(1, round(w * scale)), max(1, round(h * scale))), interpolation=cv2.INTER_AREA)
+
+
+def body_boxes(points: np.ndarray, tracked: np.ndarray, margin: float) -> np.ndarray:
+    """Per frame where the whole actor may be ``(n, 4)`` ``[x0, y0, x1, y1]`` full-resolution px, from the
+    *tracked* points ``(n, 16, 2)`` only (a lost point the tracker holds may be stale): their box, made at least
+    the body's height tall downwards from its top (the body's height in px: the median height of the frames
+    with 12 or more tracked points), grown by ``margin`` times that height on every side. NaN rows: nothing
+    tracked (the actor may be anywhere)."""
+    import warnings
+
+    ok = tracked & np.isfinite(points).all(axis=-1)
+    x = np.where(ok, points[..., 0], np.nan)
+    y = np.where(ok, points[..., 1], np.nan)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        box = np.stack([np.nanmin(x, 1), np.nanmin(y, 1), np.nanmax(x, 1), np.nanmax(y, 1)], axis=1)
+    full = ok.sum(axis=1) >= 12
+    height = float(np.median(box[full, 3] - box[full, 1])) if full.any() else float(np.nanmax(box[:, 3] - box[:, 1], initial=100.0))
+    box[:, 3] = np.maximum(box[:, 3], box[:, 1] + height)
+    g = margin * height
+    return box + np.array([-g, -g, g, g])
+
+
+def box_masks(boxes: np.ndarray, shape: tuple[int, int], scale: float) -> np.ndarray:
+    """``(k, H', W')`` bool: the reduced pixels inside each box ``(k, 4)`` full-resolution px (all for a NaN box)."""
+    h, w = shape
+    xs = (np.arange(w) + 0.5) / scale - 0.5
+    ys = (np.arange(h) + 0.5) / scale - 0.5
+    known = np.isfinite(boxes).all(axis=1)
+    b = np.where(known[:, None], boxes, 0.0)
+    inx = (xs[None, :] >= b[:, 0:1]) & (xs[None, :] <= b[:, 2:3])
+    iny = (ys[None, :] >= b[:, 1:2]) & (ys[None, :] <= b[:, 3:4])
+    return (iny[:, :, None] & inx[:, None, :]) | ~known[:, None, None]
+
+
+def background_model(samples: np.ndarray, actor: np.ndarray, min_samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per-pixel median background ``(H', W', 3)`` float32 of ``samples`` ``(k, H', W', 3)`` uint8 (reduced frames)
+    over the samples where ``actor`` ``(k, H', W')`` says the actor is not, and the mask ``(H', W')`` of pixels
+    with at least ``min_samples`` such samples."""
+    import warnings
+
+    k, h, w = samples.shape[:3]
+    free = ~actor
+    bg = np.empty((h, w, 3), dtype=np.float32)
+    rows = max(1, (8 << 20) // max(k * w * 3 * 4, 1))  # strips of about 8 MB of float32 samples
+    for r in range(0, h, rows):
+        s = samples[:, r:r + rows].astype(np.float32)
+        s[~free[:, r:r + rows]] = np.nan
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            bg[r:r + rows] = np.nanmedian(s, axis=0)
+    count = free.sum(axis=0)
+    known = count >= min_samples
+    bg = np.nan_to_num(bg)
+    if not known.all():  # the actor is always near: the background there painted in from around it
+        bg = cv2.inpaint(np.clip(np.rint(bg), 0, 255).astype(np.uint8), (~known).astype(np.uint8), 5,
+                         cv2.INPAINT_TELEA).astype(np.float32)
+    return bg, known
+
+
+def foreground(frame: np.ndarray, bg: np.ndarray, p: SilhouetteParams) -> np.ndarray:
+    """The actor's mask ``(H', W')`` uint8 (255 = actor) in one reduced BGR frame ``(H', W', 3)``, holes filled."""
+    f = frame.astype(np.float32)
+    diff = np.abs(f - bg).max(axis=2)
+    ratio = (f + 1.0) / (bg + 1.0)
+    shadow = ((ratio.max(axis=2) <= p.shadow_ratio[1]) & (ratio.min(axis=2) >= p.shadow_ratio[0])
+              & (ratio.max(axis=2) - ratio.min(axis=2) <= p.shadow_spread))
+    fg = ((diff > p.threshold) & ~shadow).astype(np.uint8) * 255
+    fg = cv2.morphologyEx(fg, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (p.open_px, p.open_px)))
+    fg = cv2.morphologyEx(fg, cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (p.close_px, p.close_px)))
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(fg, connectivity=8)
+    if n > 2:
+        area = stats[1:, cv2.CC_STAT_AREA]
+        keep = np.r_[False, area >= p.min_region * area.max()]
+        fg = np.where(keep[lab], 255, 0).astype(np.uint8)
+    contours, _ = cv2.findContours(fg, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    return cv2.drawContours(fg, contours, -1, 255, thickness=cv2.FILLED)  # holes filled (where the background is the actor's)
+
+
+def distance_outside(fg: np.ndarray) -> np.ndarray:
+    """Distance ``(H', W')`` uint8 (pixels of ``fg``'s resolution, saturating at 255) from each pixel to the
+    nearest foreground pixel of ``fg`` (0 on the silhouette); all 255 when ``fg`` is empty."""
+    if not fg.any():
+        return np.full(fg.shape, 255, dtype=np.uint8)
+    d = cv2.distanceTransform(np.where(fg > 0, 0, 255).astype(np.uint8), cv2.DIST_L2, 5)
+    return np.minimum(np.rint(d), 255).astype(np.uint8)
+
+
+def silhouette_clip(clip: VideoClip, points: np.ndarray, tracked: np.ndarray, p: SilhouetteParams) -> dict[str, np.ndarray]:
+    """The silhouette bundle of ``clip`` (see the module docstring); ``points`` ``(n, 16, 2)`` the 2D tracks,
+    full-resolution pixels, ``tracked`` ``(n, 16)`` bool."""
+    n = clip.n_frames
+    if points.shape[0] != n:
+        raise NodeError(f"the tracks have {points.shape[0]} frames, the video {n}",
+                        hint="connect the tracks made from this video")
+    pick = np.unique(np.linspace(0, n - 1, min(p.background_samples, n)).round().astype(int))
+    picked = set(int(k) for k in pick)
+    samples = []
+    for i, frame in iter_frames(clip):
+        if i - clip.start in picked:
+            samples.append(_small(frame, p.scale))
+    samples = np.stack(samples)
+    boxes = body_boxes(points, tracked, p.track_margin)
+    bg, known = background_model(samples, box_masks(boxes[pick], samples.shape[1:3], p.scale), p.min_background_samples)
+    out, area, bottom = None, np.zeros(n), np.full(n, np.nan)
+    for i, frame in iter_frames(clip):
+        fg = foreground(_small(frame, p.scale), bg, p)
+        if out is None:
+            out = np.empty((n,) + fg.shape, dtype=np.uint8)
+        out[i - clip.start] = distance_outside(fg)
+        area[i - clip.start] = np.count_nonzero(fg) / p.scale ** 2
+        rows = np.flatnonzero(fg.any(axis=1))
+        bottom[i - clip.start] = (rows[-1] + 1) / p.scale - 0.5 if rows.size else np.nan
+    return {"distance": out, "scale": np.asarray(p.scale, dtype=np.float64), "area_px": area, "bottom_px": bottom,
+            "background_known_pct": np.asarray(100.0 * known.mean())}
+
+
+@node(
+    "segment.silhouette",
+    version=1,
+    inputs={"video": VIDEO, "tracks": TRACKS2D},
+    outputs={"silhouette": SILHOUETTE},
+    params=SilhouetteParams,
+)
+def silhouette(ctx, video, tracks) -> dict:
+    """The actor's silhouette per frame as a distance-outside field (background: per-pixel median of the
+    frames where the tracks put the actor elsewhere)."""
+    p: SilhouetteParams = ctx.params
+    clip = VideoClip.model_validate(video) if isinstance(video, dict) else video
+    tr = read_tracks(tracks)
+    pts = np.asarray(tr.points, dtype=np.float64)
+    if clip.scale != 1.0:
+        pass  # tracks are in the streamed frames' pixels, as the frames below
+    out = silhouette_clip(clip, pts, np.asarray(tr.tracked, dtype=bool), p)
+    known = float(out["background_known_pct"])
+    ctx.log(f"background known on {known:.1f} % of the image; silhouette area median {np.median(out['area_px']):.0f} px²")
+    if known < 90.0:
+        ctx.warn(f"the background is known on {known:.0f} % of the image only (the actor stays on the same spot): "
+                 "the silhouette constrains nothing there")
+    return {"silhouette": out}
