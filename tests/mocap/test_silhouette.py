@@ -9,7 +9,7 @@ import pytest
 
 from tbha_graph.mocap.io.video import probe_video
 from tbha_graph.mocap.reconstruct.take_model import SilhouetteField
-from tbha_graph.mocap.segment.silhouette import SilhouetteParams, silhouette_clip
+from tbha_graph.mocap.segment.silhouette import SilhouetteParams, distance_outside, silhouette_clip
 
 ROOT = Path(__file__).resolve().parents[2]
 VIDEO = ROOT / "data" / "sample" / "sample.mp4"
@@ -45,3 +45,13 @@ def test_true_joints_lie_inside_the_silhouette(sample):
     gap = out["bottom_px"] - lower
     assert 12.0 < np.median(gap) < 28.0  # measured 18.7
     assert out["background_known_pct"] > 60.0  # measured 86.0 (where the actor always is, the background is painted in)
+
+
+def test_a_frame_without_the_actor_constrains_nothing():
+    """The actor out of view (or not found): the field is 0 everywhere, not 'every point outside'."""
+    empty = np.zeros((24, 32), np.uint8)
+    assert not distance_outside(empty).any()
+    one = empty.copy()
+    one[10, 10] = 255
+    d = distance_outside(one)
+    assert d[10, 10] == 0 and d[10, 20] == 10 and d[0, 31] == 23  # pixels to the one foreground pixel

@@ -240,7 +240,8 @@ class SilhouetteField:
     def sample(self, uv: np.ndarray, rows=slice(None)) -> tuple[np.ndarray, np.ndarray]:
         """Distance outside the silhouette ``(k, p)`` full-resolution px at image points ``uv`` ``(k, p, 2)`` px
         on the frames ``rows`` (k of them), bilinear, and its gradient ``(k, p, 2)`` (px per px). Points
-        beyond the image take the border's value (zero gradient across the border)."""
+        beyond the image are not constrained (0, zero gradient): the image says nothing there (an actor
+        partly out of view)."""
         D = self.distance
         h, w = D.shape[1:]
         idx = np.asarray(self.index)[rows][:, None]
@@ -248,6 +249,7 @@ class SilhouetteField:
         y = (uv[..., 1] + 0.5) * self.scale - 0.5
         inx = (x > 0.0) & (x < w - 1)
         iny = (y > 0.0) & (y < h - 1)
+        seen = (x >= -0.5) & (x <= w - 0.5) & (y >= -0.5) & (y <= h - 0.5)
         x = np.clip(np.nan_to_num(x), 0.0, w - 1.000001)
         y = np.clip(np.nan_to_num(y), 0.0, h - 1.000001)
         x0 = np.minimum(x.astype(np.intp), w - 2)
@@ -259,9 +261,9 @@ class SilhouetteField:
         v11 = D[idx, y0 + 1, x0 + 1].astype(np.float64)
         top = v00 + fx * (v01 - v00)
         bot = v10 + fx * (v11 - v10)
-        val = (top + fy * (bot - top)) / self.scale
-        gx = ((v01 - v00) * (1.0 - fy) + (v11 - v10) * fy) * inx  # field px per field px = full px per full px
-        gy = (bot - top) * iny
+        val = (top + fy * (bot - top)) / self.scale * seen
+        gx = ((v01 - v00) * (1.0 - fy) + (v11 - v10) * fy) * inx * seen  # field px per field px = full px per full px
+        gy = (bot - top) * iny * seen
         return val, np.stack([gx, gy], axis=-1)
 
 

@@ -19,7 +19,8 @@ Method (the camera is still):
    shadow on the floor); an opening removes specks, a closing fills seams; regions smaller than
    ``min_region`` of the largest one are dropped (noise, not the actor); holes inside the outline are filled.
 3. **Field.** :func:`cv2.distanceTransform` of the background (L2, 5x5 mask), at the reduced resolution,
-   stored as ``uint8`` in reduced pixels (saturating at 255).
+   stored as ``uint8`` in reduced pixels (saturating at 255); 0 everywhere on a frame without foreground
+   (the actor out of view: no constraint).
 
 Output ``silhouette``: ``distance`` ``(n_frames, H', W')`` uint8 (reduced pixels outside the silhouette;
 full-resolution pixels = value / scale), ``scale`` (reduced / full size), ``area_px`` ``(n_frames,)`` the
@@ -140,9 +141,11 @@ def foreground(frame: np.ndarray, bg: np.ndarray, p: SilhouetteParams) -> np.nda
 
 def distance_outside(fg: np.ndarray) -> np.ndarray:
     """Distance ``(H', W')`` uint8 (pixels of ``fg``'s resolution, saturating at 255) from each pixel to the
-    nearest foreground pixel of ``fg`` (0 on the silhouette); all 255 when ``fg`` is empty."""
+    nearest foreground pixel of ``fg`` (0 on the silhouette). An empty ``fg`` (the actor out of view, or not found)
+    gives all 0: no constraint, rather than every point outside (measured on a take whose actor walks out of the
+    image: the solver pulled the body into view, 213 -> 290 mm)."""
     if not fg.any():
-        return np.full(fg.shape, 255, dtype=np.uint8)
+        return np.zeros(fg.shape, dtype=np.uint8)
     d = cv2.distanceTransform(np.where(fg > 0, 0, 255).astype(np.uint8), cv2.DIST_L2, 5)
     return np.minimum(np.rint(d), 255).astype(np.uint8)
 
