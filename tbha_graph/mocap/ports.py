@@ -81,7 +81,8 @@ SILHOUETTE = Bundle(
     "silhouette",
     {"distance": Array("uint8", ("n_frames", None, None)), "scale": Array("float", ())},
     doc="per frame, each pixel's distance outside the actor's silhouette (0 inside), uint8 in pixels of the "
-        "field's resolution (scale x the frame's; full-resolution px = value / scale, saturating at 255); area_px (n_frames,)",
+        "field's resolution (scale x the frame's; full-resolution px = value / scale, saturating at 255); area_px (n_frames,) "
+        "its area and bottom_px (n_frames,) its lowest image row, full-resolution px",
 )
 CAMERA = Model(CameraModel, doc="calibrated camera")
 BODY = Model(Body, doc="bone lengths {bone: metres}")

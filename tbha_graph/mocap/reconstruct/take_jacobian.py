@@ -19,7 +19,7 @@ import numpy as np
 
 from ..skeleton import N_JOINTS, PARENTS
 from .take_model import (ANKLES, AXIS_TRIPLES, HINGES, J, N_BONES, N_FRAME_RES, PELVIS_JOINTS, PELVIS_SIDE, PER_FRAME,
-                         SIL_PAIRS, THORAX_JOINTS, TORSO_PAIRS, TakeProblem, bottom_residual, sil_residuals, unit,
+                         SIL_PAIRS, THORAX_JOINTS, TORSO_PAIRS, TakeProblem, bottom_residual, robust_slope, sil_residuals, unit,
                          unseen_points)
 
 _EYE = np.eye(3)
@@ -163,7 +163,6 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
             out[:, row, a] += (bot["dr_dS"] @ proj) * (bot["k"] == k)[:, None]
         if parts is not None:
             parts["bottom"] = np.concatenate([bot["dr_dS"], bot["dlogf"][:, None], bot["A"]], axis=1)
-        if parts is not None:
             parts["sil_dlogf"] = sil["dlogf"]
     return out
 
@@ -231,11 +230,7 @@ def _reprojection(prob: TakeProblem, P, g, thorax, d_thorax, pelvis, d_pelvis, o
     z = np.maximum(zc, 1e-3)
     s = d.weight[rows] / w.sigma_px  # (n, 16)
     e = ((f * Q[..., :2] / z[..., None] + d.centre) - d.points[rows]) * s[..., None]
-    c = w.robust_scale
-    root = np.sqrt(1.0 + (e / c) ** 2)
-    rho = c * np.sqrt(2.0 * (root - 1.0))
-    small = np.abs(e) < 1e-6 * c
-    drho = np.where(small, 1.0, np.abs(e) / np.where(small, 1.0, root * rho))
+    drho = robust_slope(e, w.robust_scale)
     de = np.zeros((n, N_JOINTS, 2, 3))
     de[..., 0, 0] = de[..., 1, 1] = f / z
     de[..., :, 2] = -(f * Q[..., :2] / z[..., None] ** 2) * (zc >= 1e-3)[..., None]

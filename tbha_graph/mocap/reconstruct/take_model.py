@@ -207,6 +207,14 @@ def robust(r: np.ndarray, c: float) -> np.ndarray:
     return np.sign(r) * c * np.sqrt(2.0 * (np.sqrt(1.0 + z) - 1.0))
 
 
+def robust_slope(r: np.ndarray, c: float) -> np.ndarray:
+    """The derivative of :func:`robust` by ``r`` (1 at ``r = 0``, ``→ c / |r|`` far out), same shape as ``r``."""
+    root = np.sqrt(1.0 + (r / c) ** 2)
+    rho = c * np.sqrt(2.0 * (root - 1.0))
+    small = np.abs(r) < 1e-6 * c
+    return np.where(small, 1.0, np.abs(r) / np.where(small, 1.0, root * rho))
+
+
 #: Points kept inside the actor's silhouette (:class:`SilhouetteField`): every joint centre, then every
 #: bone's midpoint, as ``(a, b)`` joint pairs whose mean is the point (``a == b``: the joint itself).
 SIL_PAIRS = np.array([(j, j) for j in range(N_JOINTS)] + [(int(PARENTS[j]), j) for j in range(1, N_JOINTS)])
@@ -283,10 +291,8 @@ def bottom_residual(P: np.ndarray, f: float, centre: np.ndarray, nf: np.ndarray,
     n = P.shape[0]
     b = sil.bottom_rows(rows)
     e = np.where(np.isfinite(b), np.maximum(np.nan_to_num(b) - v[np.arange(n), k] - w.bottom_tolerance, 0.0), 0.0) / w.sigma_bottom
-    c = w.robust_scale
-    r = robust(e, c)
-    small = e < 1e-6 * c
-    drho = np.where(e <= 0.0, 0.0, np.where(small, 1.0, e / np.where(small, 1.0, np.sqrt(1.0 + (e / c) ** 2) * r)))
+    r = robust(e, w.robust_scale)
+    drho = np.where(e <= 0.0, 0.0, robust_slope(e, w.robust_scale))  # the clamp at 0 has no slope
     return r, {"k": k, "S": S[np.arange(n), k], "drho": drho / w.sigma_bottom}
 
 
@@ -311,10 +317,8 @@ def sil_residuals(P: np.ndarray, f: float, centre: np.ndarray, sil: SilhouetteFi
     e = np.maximum(dist - w.sil_tolerance, 0.0) / w.sigma_sil
     if mask is not None:
         e = e * mask
-    c = w.robust_scale
-    r = robust(e, c)
-    small = e < 1e-6 * c
-    drho = np.where(e <= 0.0, 0.0, np.where(small, 1.0, e / np.where(small, 1.0, np.sqrt(1.0 + (e / c) ** 2) * r)))
+    r = robust(e, w.robust_scale)
+    drho = np.where(e <= 0.0, 0.0, robust_slope(e, w.robust_scale))  # the clamp at 0 has no slope
     return r, {"drho": drho, "grad": grad, "X": X}
 
 

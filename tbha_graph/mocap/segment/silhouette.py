@@ -125,8 +125,8 @@ def foreground(frame: np.ndarray, bg: np.ndarray, p: SilhouetteParams) -> np.nda
     f = frame.astype(np.float32)
     diff = np.abs(f - bg).max(axis=2)
     ratio = (f + 1.0) / (bg + 1.0)
-    shadow = ((ratio.max(axis=2) <= p.shadow_ratio[1]) & (ratio.min(axis=2) >= p.shadow_ratio[0])
-              & (ratio.max(axis=2) - ratio.min(axis=2) <= p.shadow_spread))
+    rmax, rmin = ratio.max(axis=2), ratio.min(axis=2)
+    shadow = (rmax <= p.shadow_ratio[1]) & (rmin >= p.shadow_ratio[0]) & (rmax - rmin <= p.shadow_spread)
     fg = ((diff > p.threshold) & ~shadow).astype(np.uint8) * 255
     fg = cv2.morphologyEx(fg, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (p.open_px, p.open_px)))
     fg = cv2.morphologyEx(fg, cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (p.close_px, p.close_px)))
@@ -193,8 +193,6 @@ def silhouette(ctx, video, tracks) -> dict:
     clip = VideoClip.model_validate(video) if isinstance(video, dict) else video
     tr = read_tracks(tracks)
     pts = np.asarray(tr.points, dtype=np.float64)
-    if clip.scale != 1.0:
-        pass  # tracks are in the streamed frames' pixels, as the frames below
     out = silhouette_clip(clip, pts, np.asarray(tr.tracked, dtype=bool), p)
     known = float(out["background_known_pct"])
     ctx.log(f"background known on {known:.1f} % of the image; silhouette area median {np.median(out['area_px']):.0f} px²")
