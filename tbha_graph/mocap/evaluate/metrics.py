@@ -58,7 +58,7 @@ from ...core.node import node, optional
 from ...core.types import Json
 from .verdict import verdict
 from ..bundles.truth import check_ground_truth, truth_joints2d, truth_visibility
-from ..ports import CAMERA, ERRORS, METRICS, MOTION, TRACKS2D, TRUTH
+from ..ports import CAMERA, ERRORS, JOINTS3D_EXPORT, METRICS, MOTION, TRACKS2D, TRUTH
 from ..body import DEFAULT_ANKLE_HEIGHT
 from ..skeleton import JOINT_NAMES, N_JOINTS, PATCHED_JOINTS
 from . import measures as m
@@ -191,10 +191,12 @@ def patch_figures(joints: np.ndarray, points: np.ndarray, truth: dict, alignment
 
 
 def compute_metrics(
-    motion: dict, tracks: dict, camera, truth: dict | None = None, raw_motion: dict | None = None, alignment: str = "rigid"
+    motion: dict, tracks: dict, camera, truth: dict | None = None, raw_motion: dict | None = None, alignment: str = "rigid",
+    exported: dict | None = None,
 ) -> tuple[dict, dict[str, np.ndarray]]:
     """The ``metrics`` dict and the ``errors`` bundle (see module docstring). ``camera`` is a
-    :class:`~tbha_graph.mocap.camera.Camera`; ``truth`` ``None`` or ``{}`` means no ground truth."""
+    :class:`~tbha_graph.mocap.camera.Camera`; ``truth`` ``None`` or ``{}`` means no ground truth;
+    ``exported``: ``export.joints3d``'s bundle (its ``joints``: where the BVH puts every joint), scored too."""
     joints, fps = _joints(motion, "motion")
     n = joints.shape[0]
     points = np.asarray(tracks["points"], dtype=np.float64)
@@ -244,33 +246,41 @@ def compute_metrics(
             raw_figures, _ = truth_figures(raw, fps, truth, alignment)
             metrics["raw_mpjpe_mm"] = raw_figures["mpjpe_mm"]
             metrics["raw_accel_error_m_s2"] = raw_figures["accel_error_m_s2"]
+        if exported is not None:  # what the user gets: the BVH's joints (rotations fitted, hinge limits, FK)
+            out = np.asarray(exported["joints"], dtype=np.float64)
+            _same_length(n, out.shape[0], "the exported joints")
+            export_figures, _ = truth_figures(out, fps, truth, alignment)
+            metrics["export_mpjpe_mm"] = export_figures["mpjpe_mm"]
+            metrics["export_pa_mpjpe_mm"] = export_figures["pa_mpjpe_mm"]
         metrics["per_joint_mpjpe_mm"] = per_joint
     return metrics, errors
 
 
 @node(
     "evaluate.metrics",
-    version=3,
+    version=4,
     inputs={
         "motion": MOTION,
         "tracks": TRACKS2D,
         "camera": CAMERA,
         "truth": optional(TRUTH, "ground truth (io.ground_truth); {} or unconnected = none"),
         "raw_motion": optional(MOTION, "the motion before filtering, to report what the filter changed"),
+        "exported": optional(JOINTS3D_EXPORT, "export.joints3d's joints (where the BVH puts them), scored as "
+                                              "export_mpjpe_mm / export_pa_mpjpe_mm beside the solver's motion"),
         "extra": optional(Json(), "figures from other nodes' reports (e.g. filter.foot_contact's foot sliding), "
                                   "merged into metrics: their top-level numbers and strings"),
     },
     outputs={"metrics": METRICS, "errors": ERRORS},
     params=MetricsParams,
 )
-def metrics(ctx, motion, tracks, camera, truth, raw_motion, extra):
+def metrics(ctx, motion, tracks, camera, truth, raw_motion, extra, exported):
     """Quality figures of a capture (reprojection, bone-length stability, jitter) and, with ground
     truth, its accuracy (MPJPE, PA-MPJPE, 2D error, acceleration error); per-frame errors for plots.
 
     Output ``metrics``: flat dict (units in the key names: _mm, _px, _pct, _m_s3...), plus the nested
     ``per_joint_mpjpe_mm``. Output ``errors``: per-frame arrays (see tbha_graph.mocap.evaluate.metrics).
     """
-    result, errors = compute_metrics(motion, tracks, camera.camera(), truth, raw_motion, ctx.params.alignment)
+    result, errors = compute_metrics(motion, tracks, camera.camera(), truth, raw_motion, ctx.params.alignment, exported)
     if isinstance(extra, dict):
         result.update({k: v for k, v in extra.items() if isinstance(v, (int, float, str, bool)) and k not in result})
         notes = [w for w in extra.get("warnings", []) if isinstance(w, str)]
