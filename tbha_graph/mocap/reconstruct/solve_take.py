@@ -575,6 +575,18 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
     return {"joints": joints, "camera": camera, "sides": sides, "report": report, "camera_frame_joints": P}
 
 
+def silhouette_field(silhouette: dict, n_frames: int) -> SilhouetteField:
+    """The solver's view of a ``SILHOUETTE`` port value (``segment.silhouette``) for a take of ``n_frames``
+    frames; a silhouette of another length is an error (it was made from another video)."""
+    dist = np.asarray(silhouette["distance"])
+    if dist.shape[0] != n_frames:
+        raise NodeError(f"the silhouette has {dist.shape[0]} frames, the tracks {n_frames}",
+                        hint="connect the silhouette made from the same video as the tracks")
+    bottom = silhouette.get("bottom_px")
+    return SilhouetteField(dist, float(silhouette["scale"]), np.arange(n_frames),
+                           None if bottom is None else np.asarray(bottom, dtype=np.float64))
+
+
 @node(
     "reconstruct.solve_take",
     version=1,
@@ -606,15 +618,7 @@ def solve_take(ctx, tracks, body, silhouette=None):
     if p.confidence_power > 0 and confidence is None:
         ctx.warn("confidence_power is set but the tracks carry no confidence: every tracked point weighs the same "
                  "(detectors such as detect.mediapipe_pose give one; suit trackers do not)")
-    sil = None
-    if silhouette is not None:
-        dist = np.asarray(silhouette["distance"])
-        if dist.shape[0] != tr.n_frames:
-            raise NodeError(f"the silhouette has {dist.shape[0]} frames, the tracks {tr.n_frames}",
-                            hint="connect the silhouette made from the same video as the tracks")
-        bottom = silhouette.get("bottom_px")
-        sil = SilhouetteField(dist, float(silhouette["scale"]), np.arange(tr.n_frames),
-                              None if bottom is None else np.asarray(bottom, dtype=np.float64))
+    sil = None if silhouette is None else silhouette_field(silhouette, tr.n_frames)
     out = solve_take_arrays(tr.points, tr.tracked, lengths, tr.width, tr.height, float(tr.fps), p,
                             progress=ctx.progress, confidence=confidence, silhouette=sil)
     rep = out["report"]

@@ -1,0 +1,119 @@
+"""Where the whole-take solver's error comes from, on the sample and on ``bench/solver_accuracy.py``'s renders.
+
+The capture's 3D error has three sources this bench separates (seq-MPJPE: one rigid alignment over the whole
+take, no scale; the solver as the default pipeline runs it, tracks and silhouette from its nodes):
+
+* ``<take>_from_truth_mm``: the solver started AT the truth (true joints, camera and floor, the true focal
+  length held) and let converge: the nearest minimum of its own objective to the truth. What no better
+  optimiser could improve: only a better model of the tracks (or better tracks) can.
+* ``<take>_focal_given_mm``: the solver from its own start with the true focal length given. Its excess over
+  the line above is the optimiser's (local minima: depth sides, heading through turns).
+* ``<take>_focal_err_pct_{min,median,max}`` and ``<take>_estimated_mm_{min,median,max}``: the focal length
+  estimated (the default), each of five times with the starting focal lengths (``focal_grid``) scaled by
+  0.9, 0.95, 1, 1.05, 1.1. A take that determines its focal length gives the same answer every time; the
+  spread shows how much of an estimate is luck (``_at_default`` gives the unscaled run's figures).
+
+    python bench/solver_diagnosis.py [--takes sample,hop131_03_f1000_high]   # a few minutes
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+from solver_accuracy import TAKES  # noqa: E402
+
+from tbha_graph.core.cache import Cache  # noqa: E402
+from tbha_graph.core.runner import load_graph, run_graph  # noqa: E402
+from tbha_graph.mocap.body import body_lengths  # noqa: E402
+from tbha_graph.mocap.bundles.tracks import read_tracks  # noqa: E402
+from tbha_graph.mocap.evaluate.measures import align_clip  # noqa: E402
+from tbha_graph.mocap.reconstruct import solve_take as st  # noqa: E402
+
+GRID_SCALES = (0.9, 0.95, 1.0, 1.05, 1.1)
+
+
+def capture_inputs(take: str) -> tuple[dict, dict | None, dict]:
+    """Tracks, silhouette and ground truth of ``take`` ("sample" or a name of ``solver_accuracy.TAKES``), from
+    the default pipeline's nodes (cached in the user cache, so a second run only solves)."""
+    if take == "sample":
+        graph = load_graph(ROOT / "pipelines" / "default.yaml")
+        truth_ref = "truth.truth"
+    else:
+        _, clip, seconds, eye, target, f = next(t for t in TAKES if t[0] == take)
+        graph = load_graph(ROOT / "pipelines" / "evaluate_render.yaml",
+                           vars={"bvh": str(ROOT / "data" / "mocap" / "cmu" / clip)},
+                           sets={"lead_in.duration": seconds, "camera.eye": list(eye), "camera.target": list(target),
+                                 "camera.focal_px": f})
+        truth_ref = "render.ground_truth"
+    run = run_graph(graph, outputs=["track", "silhouette", truth_ref.split(".")[0]],
+                    cache=Cache(Path.home() / ".cache" / "tbha-graph"))
+    return run.output("track.tracks"), run.output("silhouette.silhouette"), run.output(truth_ref)
+
+
+def seq_mpjpe_mm(joints: np.ndarray, truth_world: np.ndarray) -> float:
+    """Mean joint error (mm) after one rigid alignment of the whole take (no scale)."""
+    aligned, _ = align_clip(joints, truth_world, mode="rigid")
+    return float(np.linalg.norm(aligned - truth_world, axis=-1).mean() * 1000.0)
+
+
+def diagnose(take: str) -> dict[str, float]:
+    tracks, silhouette, truth = capture_inputs(take)
+    tr = read_tracks(tracks)
+    n = tr.n_frames
+    sil = None if silhouette is None else st.silhouette_field(silhouette, n)
+    lengths = body_lengths(None)
+    f_true = float(truth["K"][0, 0])
+    T = np.asarray(truth["joints3d_world"])[:n]
+    out: dict[str, float] = {}
+
+    def solve(**params):
+        return st.solve_take_arrays(tr.points, tr.tracked, lengths, tr.width, tr.height, float(tr.fps),
+                                    st.SolveTakeParams(**params), silhouette=sil)
+
+    # the objective's own minimum nearest the truth: start at it (camera frame), focal held, converge
+    p = st.SolveTakeParams(focal_px=f_true)
+    R, t = np.asarray(truth["R"]), np.asarray(truth["t"])
+    P_true = np.asarray(truth["joints3d_cam"])[:n]
+    floor = (R[:, 1], float(-R[:, 1] @ t))  # world y (up) in camera coordinates, camera-frame height offset
+    centre = np.array([(tr.width - 1) / 2.0, (tr.height - 1) / 2.0])
+    g0 = st.globals_vector(f_true, floor[1], False, p.free_lengths)
+    contact = st.contacts_from_image(tr.points, tr.tracked, float(tr.fps))
+    prob, x, _, _, _ = st.solve_frames(tr.points, tr.tracked.astype(np.float64), lengths, centre, float(tr.fps), P_true,
+                                       floor, g0, p, 50, False, (f_true, 1e-4), False, contact, tol=1e-6, silhouette=sil)
+    P = prob.solution(x)[4]
+    out["from_truth_mm"] = seq_mpjpe_mm((P - t) @ R, T)  # camera -> world: R^T (X - t), rows
+    out["focal_given_mm"] = seq_mpjpe_mm(solve(focal_px=f_true)["joints"], T)
+    grid = st.SolveTakeParams().focal_grid
+    errs, mm = [], []
+    for s in GRID_SCALES:
+        res = solve(focal_grid=[g * s for g in grid])
+        errs.append(100.0 * (res["report"]["focal_px"] / f_true - 1.0))
+        mm.append(seq_mpjpe_mm(res["joints"], T))
+    for key, v in (("focal_err_pct", errs), ("estimated_mm", mm)):
+        out[f"{key}_min"], out[f"{key}_median"], out[f"{key}_max"] = float(np.min(v)), float(np.median(v)), float(np.max(v))
+        out[f"{key}_at_default"] = float(v[GRID_SCALES.index(1.0)])
+    out["focal_abs_err_pct_median"] = float(np.median(np.abs(errs)))
+    return out
+
+
+def main(argv: list[str] | None = None) -> None:
+    names = ["sample"] + [t[0] for t in TAKES]
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n")[0])
+    ap.add_argument("--takes", default=",".join(names), help="comma-separated, of: " + ", ".join(names))
+    args = ap.parse_args(argv)
+    for take in args.takes.split(","):
+        if take not in names:
+            ap.error(f"unknown take {take!r}; choose from {', '.join(names)}")
+        for key, v in diagnose(take).items():
+            print(f"{take}_{key}={v:.1f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
