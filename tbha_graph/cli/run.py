@@ -40,7 +40,7 @@ def run_command(args: argparse.Namespace) -> int:
 
 
 #: the figures the short summary shows when the metrics have them (every one: --verbose; docs/metrics.md)
-HEADLINE = ("tracked_pct", "reprojection_px_median", "mpjpe_mm", "pa_mpjpe_mm", "export_mpjpe_mm", "export_pa_mpjpe_mm",
+HEADLINE = ("tracked_pct", "reprojection_px_median", "fit_px_median", "mpjpe_mm", "pa_mpjpe_mm", "export_mpjpe_mm", "export_pa_mpjpe_mm",
             "focal_px", "camera_height_m", "camera_distance_m", "camera_tilt_deg")
 
 

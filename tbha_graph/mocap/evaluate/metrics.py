@@ -4,8 +4,9 @@ Figures that need no ground truth (available for a user's own video):
 
 * ``frames``, ``video_fps`` (of the 2D tracks, i.e. of the video), ``tracked_pct``: % of the (frame,
   joint) pairs of the tracks flagged ``tracked`` (16 joints: the head's dark hair counts as its patch).
-* ``reprojection_px_median`` / ``_p95``: the final 3D motion projected with the camera vs the tracked 2D
-  points (tracked pairs only), pixels.
+* ``reprojection_px_median`` / ``_p95``: the final 3D motion's joint centres projected with the camera vs the
+  tracked 2D points (tracked pairs only), pixels (a suit's patches sit a few px off their joints; the solver's
+  fit of the points as it models them is ``fit_px_median``, passed on from its report via ``extra``).
 * ``bone_length_cv_pct``: mean over the 15 bones of std/mean of the bone's length over frames, %.
 * ``jitter_m_s3``: WHAM's jitter, mean |third difference| x fps^3 over frames and joints, m/s^3
   (``raw_jitter_m_s3`` for ``raw_motion``, the motion before filtering, when connected).
@@ -102,7 +103,7 @@ def _same_length(n: int, other: int, what: str) -> None:
 def quality_figures(joints: np.ndarray, fps: float, tracks: dict, camera) -> tuple[dict, np.ndarray]:
     """Figures needing no ground truth (see module docstring) and the per-frame reprojection error (n,) px.
     The reprojection compares joint centres with tracked patch centres, so it includes the patches' offsets
-    from the joints (a few px); the solver's own fit of the patches is its report's ``reprojection_px_median``."""
+    from the joints (a few px); the solver's own fit of the patches is its report's ``fit_px_median``."""
     tracked = np.asarray(tracks["tracked"], dtype=bool)
     reproj = m.reprojection_errors(joints, camera, tracks["points"], tracked)
     figures = {
