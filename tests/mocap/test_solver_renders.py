@@ -1,0 +1,65 @@
+"""The default pipeline on three CMU clips rendered by the project's renderer with other cameras than the
+sample's (``bench/solver_accuracy.py``'s takes: focal 500-1200 px, 0.9-1.8 m high, 5-6 m away, a walk that
+turns, a hop, a far walk), scored against the renders' truth as ``metrics.json`` scores it.
+
+With the true focal length given the figures are the solver's own; bounds sit about 1.5x above what was
+measured (2026-11-26), so a regression past them is a real loss. With the focal length estimated the
+choice among starting focal lengths is luck (``bench/solver_diagnosis.py``: five starting grids scaled by
+0.9-1.1 gave +1..+18 %, -30..-18 % and -64..-18 % on these takes), so what is asserted there is that the
+run says so (the ambiguity warning) and stays within that measured spread.
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+from tbha_graph.core.cache import Cache
+from tbha_graph.core.runner import load_graph, run_graph
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "bench"))
+from solver_accuracy import TAKES  # noqa: E402  (one definition of the takes, shared with the bench)
+
+#: take -> (mpjpe_mm, joint_angle_err_deg, floor_penetration_mm) bounds with the focal length given;
+#: measured 119.7 / 12.5 / 4.9, 43.7 / 6.2 / 6.2, 57.0 / 6.9 / 2.4
+GIVEN_BOUNDS = {
+    "walk131_01_f500_low": (180.0, 18.8, 7.4),
+    "hop131_03_f1000_high": (66.0, 9.3, 9.3),
+    "walk131_02_f1200_far": (86.0, 10.4, 3.6),
+}
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    return Cache(tmp_path_factory.mktemp("renders-cache"))
+
+
+def capture(take, cache, focal_given: bool) -> dict:
+    name, clip, seconds, eye, target, f = take
+    vars = {"bvh": str(ROOT / "data" / "mocap" / "cmu" / clip)}
+    if focal_given:
+        vars["focal_px"] = f
+    g = load_graph(ROOT / "pipelines" / "evaluate_render.yaml", vars=vars,
+                   sets={"lead_in.duration": seconds, "camera.eye": list(eye), "camera.target": list(target),
+                         "camera.focal_px": f})
+    return run_graph(g, outputs=["metrics.json"], cache=cache).output("metrics.json")
+
+
+@pytest.mark.parametrize("take", TAKES, ids=[t[0] for t in TAKES])
+def test_render_given_its_focal_length(take, cache):
+    m = capture(take, cache, focal_given=True)
+    mpjpe, angle, floor = GIVEN_BOUNDS[take[0]]
+    assert m["mpjpe_alignment"] == "rigid" and m["alignment_scale"] == 1
+    assert abs(m["focal_err_pct"]) < 0.01
+    assert m["mpjpe_mm"] < mpjpe and m["joint_angle_err_deg"] < angle and m["floor_penetration_mm"] < floor
+    assert m["foot_skate_mm"] < 4.7  # measured 2.4-3.2 mm per planted frame
+
+
+@pytest.mark.parametrize("take", TAKES, ids=[t[0] for t in TAKES])
+def test_render_with_its_focal_length_estimated(take, cache):
+    m = capture(take, cache, focal_given=False)
+    assert any("focal length is ambiguous" in w for w in m["warnings"])  # the take does not determine it: said
+    assert abs(m["focal_err_pct"]) < 70.0  # within the measured spread (-64..+18 %): measured +6.6, -23.4, -19.3
+    assert m["mpjpe_mm"] < 220.0  # measured 145.9 / 115.6 / 82.3 mm (the worst of five grids: 166 / 145 / 126)
