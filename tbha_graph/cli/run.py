@@ -73,8 +73,8 @@ def print_summary(run, out_dir: Path, verbose: bool = False) -> None:
             if frames is not None:
                 print(f"  {frames} frames{fps}")
             shown = [k for k in HEADLINE if isinstance(metrics.get(k), (int, float)) and not isinstance(metrics.get(k), bool)]
-            for i in range(0, len(shown), 2):
-                print("  " + "   ".join(f"{k} {fmt_value(metrics[k])}" for k in shown[i : i + 2]))
+            for i in range(0, len(shown), 3):  # three a line: the summary stays short with warnings below
+                print("  " + "   ".join(f"{k} {fmt_value(metrics[k])}" for k in shown[i : i + 3]))
     if warnings:
         print(f"  {len(warnings)} warning(s):")
         for w in warnings if verbose else warnings[:3]:
