@@ -295,7 +295,7 @@ def test_confidence_power_without_confidence_is_a_warning(truth):
 
 def test_seat_on_outline_puts_the_body_back_at_its_depth(truth):
     """A body moved along its roots' rays to 0.8x and 1.3x its depth (same root pixel, another size) is put back at
-    its depth by the silhouette's lowest row (the floor below the lower ankle seen 4 px above it), on the masked
+    its depth by the silhouette's lowest row (the floor below the lower ankle seen 1 px below it), on the masked
     frames only."""
     from tbha_graph.mocap.reconstruct.take_model import SilhouetteField, seat_on_outline
 
@@ -304,7 +304,7 @@ def test_seat_on_outline_puts_the_body_back_at_its_depth(truth):
     nf, d = R[:, 1], float(-R[:, 1] @ t)
     A = P[:, [12, 15]]
     S = A - (A @ nf + d)[..., None] * nf
-    bottom = (700.0 * S[..., 1] / S[..., 2] + centre[1]).max(axis=1) + 4.0
+    bottom = (700.0 * S[..., 1] / S[..., 2] + centre[1]).max(axis=1) - 1.0  # lift_px -1: the floor point 1 px below the lowest row
     sil = SilhouetteField(np.zeros((20, 4, 4), np.uint8), 0.5, np.arange(20), bottom)
     moved = P * np.r_[np.full(10, 0.8), np.full(10, 1.3)][:, None, None]  # about the camera: roots on their rays
     moved = P + (moved[:, :1] - P[:, :1])  # the body moved unchanged

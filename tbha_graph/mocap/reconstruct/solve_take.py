@@ -57,11 +57,10 @@ twist prior (the pelvis faces where the thorax faces, ``sigma_twist`` about 11 d
    no torso patch is, the thorax and pelvis facing at least 154 degrees away from the camera. On frames where fewer
    than 3 of the torso's 7 points are tracked, two more: the model covers the outline (:func:`.take_model.cover_residuals`:
    32 samples of its contour each within about 0.1 m of a projected bone; the inside term alone let a leg swing
-   into depth, or the torso stay side-on inside a back view's wider outline), and before the pose solve each such
-   frame's body is moved along its root's ray to the depth where its lower foot stands on the outline's lowest row
-   (:func:`.take_model.seat_on_outline`; started from the last pose seen, the solve kept a body walking away
-   1.2 m short). Measured on the 6 turning renders of ``bench/labelling.py``: seq-MPJPE 333/165/174 (upper/lower
-   suit) and 434/305/224 mm (left/right) without these, 258/113/131 and 294/153/199 with them.
+   into depth, or the torso stay side-on inside a back view's wider outline); and before the pose solve each
+   head-only frame's body is moved along its root's ray to the depth where its lower foot stands on the outline's
+   lowest row (:func:`.take_model.seat_on_outline`; started from the last pose seen, the solve kept a body walking
+   away 1.2 m short; on every torso-unseen frame instead of the head-only ones it placed side views 0.6 m too far).
 5. **World frame.** y up = the floor normal, origin on the floor below the hips on the first frame, z the
    actor's forward on the first frame made horizontal (the actor faces +z in the T-pose).
 
@@ -87,7 +86,7 @@ from ..ports import BODY, CAMERA, MOTION, SIDES, SILHOUETTE, TRACKS2D, report_po
 from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS
 from ..body import DEFAULT_ANKLE_HEIGHT, body_lengths, lengths_to_body, tpose_on_floor
 from .take_model import (ANKLES, DEFAULT_POINT_OFFSETS, TORSO_JOINTS, TORSO_PAIRS, SilhouetteField, TakeData, TakeProblem, Weights,
-                         bone_directions, fronts, pack_initial, point_positions, seat_on_outline, torso_unseen, unit)
+                         bone_directions, fronts, pack_initial, point_positions, seat_on_outline, unit)
 from .take_solver import levenberg_marquardt
 from .take_solver import search_sides_lm as search_sides
 from .temporal_ray_sphere import TemporalRaySphereParams, solve_temporal
@@ -535,8 +534,8 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
     if whole and (estimated or p.side_search):  # the pose at the chosen focal length under p's priors: LM,
         f_sel, nf_s, d_s, _, P_s = prob.solution(x)  # the depth-side search on the whole take, LM (focal held)
         g_s = np.concatenate([[np.log(f_sel), 0.0, 0.0, d_s], prob.globals_of(x)[4:]])
-        if sil is not None:  # where the torso is not seen, the body first set on the floor at the outline's lowest row
-            P_s = seat_on_outline(P_s, f_sel, centre, nf_s, d_s, sil, torso_unseen(weight))
+        if sil is not None:  # where only the head is seen, the body first set on the floor at the outline's lowest row
+            P_s = seat_on_outline(P_s, f_sel, centre, nf_s, d_s, sil, facing_away(weight))
         prob, x, cost, ne, kept2 = solve_frames(points, weight, lengths, centre, fps, P_s, (nf_s, d_s), g_s, p,
                                                 p.max_iterations, False, (f_sel, 1e-4), p.side_search, contact,
                                                 tol=POSE_TOL, silhouette=sil)
@@ -545,7 +544,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
         g_s = np.concatenate([[np.log(f_sel), 0.0, 0.0, d_s], prob.globals_of(x)[4:]])
         P_w = interpolate_joints(P_s, cam_rows, n)
         if sil is not None:
-            P_w = seat_on_outline(P_w, f_sel, centre, nf_s, d_s, sil, torso_unseen(weight))
+            P_w = seat_on_outline(P_w, f_sel, centre, nf_s, d_s, sil, facing_away(weight))
         P_w, kept2, report["windows"] = solve_windows(points, weight, lengths, centre, fps, P_w,
                                    (nf_s, d_s), g_s, p, contact, p.window_frames, p.window_overlap, progress, sil)
         prob, _ = make_problem(points, weight, lengths, centre, fps, P_w, (nf_s, d_s), p, False, None, contact, g_s, sil)

@@ -420,15 +420,16 @@ def cover_residuals(P: np.ndarray, f: float, centre: np.ndarray, sil: Silhouette
 
 
 def seat_on_outline(P: np.ndarray, f: float, centre: np.ndarray, nf: np.ndarray, dfl: float, sil: SilhouetteField,
-                    frames: np.ndarray, lift_px: float = 4.0, scales: np.ndarray = np.geomspace(0.6, 1.8, 241)) -> np.ndarray:
+                    frames: np.ndarray, lift_px: float = -1.0, scales: np.ndarray = np.geomspace(0.6, 1.8, 241)) -> np.ndarray:
     """A start for the frames where the image says little of the body: joints ``P`` ``(n, 16, 3)`` (camera frame)
     with each frame of the mask ``frames`` ``(n,)`` moved, unchanged, along its root's viewing ray (``P + (s - 1)
     P_root``, the root's pixel kept) to the depth where the floor below its lower ankle (the lower in the image)
-    is seen ``lift_px`` above the silhouette's lowest row (the sole of the foot it stands on), the factor ``s``
-    the best of ``scales``, median-filtered over 5 frames; frames where that row is unknown stay. With the
-    actor's back to the camera only the head is tracked and the whole-take solve, started from the last pose seen,
-    kept the body near where it turned (131_01: 1.2 m short of its walk away); floor ``nf·X + dfl = 0``, focal
-    ``f`` px."""
+    is seen ``lift_px`` above the silhouette's lowest row (-1: 1 px below it, the median over the 6 turning
+    renders' back-turned frames of ``bench/labelling.py``, quartiles -7 and +2 px: seen from behind, the nearer
+    foot is the trailing one, its heel lifting), the factor ``s`` the best of ``scales``, median-filtered over 5
+    frames; frames where that row is unknown stay. With the actor's back to the camera only the head is tracked
+    and the whole-take solve, started from the last pose seen, kept the body near where it turned (131_01: 1.2 m
+    short of its walk away); floor ``nf·X + dfl = 0``, focal ``f`` px."""
     from scipy.ndimage import median_filter
 
     b = sil.bottom_rows()
