@@ -68,9 +68,10 @@ def test_block_normal_equations_equal_the_dense_ones(truth, free_offsets, free_l
         from test_take_jacobian import thin_silhouettes
 
         silhouette = thin_silhouettes(700.0 * P[..., :2] / P[..., 2:3] + centre + [3.0, 0.0], ghost=-60.0)
-    prob, d = problem(truth, P, uv + 0.7, centre, L, Weights(support_band=-0.03 if sil else 0.1), free_offsets=free_offsets,
+    prob, d = problem(truth, P, uv + 0.7, centre, L, Weights(support_band=-0.03 if sil else 0.1, upright_sin=0.02), free_offsets=free_offsets,
                       free_lengths=free_lengths, silhouette=silhouette)
     prob.d.away = np.arange(9) % 3 == 0 if sil else None
+    prob.d.up = -truth["R"][:, 1] if sil else None  # the vertical: the upright term on the away frames
     if sil:  # limbs untracked on every other frame: the silhouette's term on their points; the torso too on every
         prob.d.weight[::2, 5:] = 0.0  # fourth: the cover term there (a second right leg the model lacks)
         prob.d.weight[::4, :5] = 0.0

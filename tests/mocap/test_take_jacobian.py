@@ -21,7 +21,8 @@ KINDS = {"reprojection": slice(0, 32), "torso": slice(32, 32 + len(TORSO_PAIRS))
          "hinge": slice(43, 43 + len(HINGES)), "below_floor": slice(47, 49), "contact": slice(49, 51),
          "head": slice(51, 54), "twist": slice(54, 57), "silhouette": slice(N_FRAME_RES, N_FRAME_RES + N_SIL - 4),
          "support": slice(N_FRAME_RES + N_SIL - 4, N_FRAME_RES + N_SIL - 3), "away": slice(N_FRAME_RES + N_SIL - 3, N_FRAME_RES + N_SIL - 1),
-         "bottom": slice(N_FRAME_RES + N_SIL - 1, N_FRAME_RES + N_SIL), "cover": slice(N_FRAME_RES + N_SIL, N_FRAME_RES + N_SIL + N_COVER)}
+         "bottom": slice(N_FRAME_RES + N_SIL - 1, N_FRAME_RES + N_SIL), "cover": slice(N_FRAME_RES + N_SIL, N_FRAME_RES + N_SIL + N_COVER),
+         "upright": slice(N_FRAME_RES + N_SIL + N_COVER, N_FRAME_RES + N_SIL + N_COVER + 1)}
 
 
 def thin_silhouettes(uv: np.ndarray, scale: float = 0.5, shape=(240, 320), ghost: float = 0.0, width: int = 1) -> SilhouetteField:
@@ -66,16 +67,17 @@ def test_analytic_frame_jacobian_equals_central_differences():
     contact = contacts_from_image(uv, weight > 0, fps)
     contact[::2] = True
     joints_uv = 700.0 * P[..., :2] / P[..., 2:3] + centre
-    data = TakeData(uv, weight, L, centre, fps, 0.08, contact, rest_pair_distances(L, 0.08),
-                    silhouette=thin_silhouettes(joints_uv, ghost=60.0), away=np.arange(n) % 2 == 0)
     nf, d = R[:, 1], float(-R[:, 1] @ t)
-    prob = TakeProblem(data, bone_directions(P), nf, Weights(sigma_twist=0.2, support_band=-0.03), DEFAULT_POINT_OFFSETS.copy(), free_offsets=False)
+    data = TakeData(uv, weight, L, centre, fps, 0.08, contact, rest_pair_distances(L, 0.08),
+                    silhouette=thin_silhouettes(joints_uv, ghost=60.0), away=np.arange(n) % 2 == 0, up=-nf)
+    prob = TakeProblem(data, bone_directions(P), nf, Weights(sigma_twist=0.2, support_band=-0.03, upright_sin=0.15),
+                       DEFAULT_POINT_OFFSETS.copy(), free_offsets=False)
     g = np.array([np.log(700.0), 0.0, 0.0, d - 0.04])  # the floor 4 cm up: some ankles below it
     fr = pack_initial(P, prob.ref).reshape(n, PER_FRAME)
     fr[:, 3:] += rng.normal(scale=0.35, size=(n, PER_FRAME - 3))  # bones turned ~20 degrees: hinges bent wrongly
     h = 1e-6
     F = prob.n_frame_res
-    assert F == N_FRAME_RES + N_SIL + N_COVER
+    assert F == N_FRAME_RES + N_SIL + N_COVER + 1
     num = np.empty((n, F, PER_FRAME))
     for i in range(PER_FRAME):
         fp, fm = fr.copy(), fr.copy()
@@ -93,6 +95,8 @@ def test_analytic_frame_jacobian_equals_central_differences():
     assert (away[::2] > 0).mean() > 0.5 and not away[1::2].any()  # the sample faces the camera: active where flagged
     bottom = prob.frame_terms(Pj, g)[:, KINDS["bottom"]]
     assert (bottom > 0).mean() > 0.3 and not bottom[::4].any()  # measured 0.43
+    upright = prob.frame_terms(Pj, g)[:, KINDS["upright"]]
+    assert (upright[::2] > 0).mean() > 0.6 and not upright[1::2].any()  # measured 0.93; only where flagged away
     cover = prob.frame_terms(Pj, g)[:, KINDS["cover"]]
     assert not cover[weight[:, 1] > 0].any()  # only where the torso is not seen
     assert (cover[1::4] > 0).mean() > 0.22 and (cover > prob.w.robust_scale).any()  # measured 0.33, some beyond the soft-L1 scale

@@ -54,7 +54,9 @@ twist prior (the pelvis faces where the thorax faces, ``sigma_twist`` about 11 d
    defects only pulled: the hop given its focal length 48 -> 52 mm); the floor point below the lower ankle at
    most 8 px higher in the image than the outline's lowest row (else a body farther away and smaller, its head
    on the same pixel, fits inside as well); the lower ankle within 0.1 m of its standing height; and on frames where the head is tracked but
-   no torso patch is, the thorax and pelvis facing at least 154 degrees away from the camera. On frames where fewer
+   no torso patch is, the thorax and pelvis facing at least 154 degrees away from the camera and the spine within
+   20 degrees of the vertical (:func:`.take_model.upright_residual`; the floor's normal when the problem is made;
+   without it the back-turned spines leaned 31 degrees, median, the truth's 13). On frames where fewer
    than 3 of the torso's 7 points are tracked, two more: the model covers the outline (:func:`.take_model.cover_residuals`:
    32 samples of its contour each within about 0.1 m of a projected bone; the inside term alone let a leg swing
    into depth, or the torso stay side-on inside a back view's wider outline); and before the pose solve each
@@ -303,7 +305,7 @@ def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: Solve
     contact = np.asarray(contact, dtype=bool)
     data = TakeData(points, weight, lengths, centre, fps, p.ankle_height, contact,
                     rest_pair_distances(lengths, p.ankle_height), silhouette=silhouette,
-                    away=None if silhouette is None else facing_away(weight))
+                    away=None if silhouette is None else facing_away(weight), up=nf)
     w = Weights(sigma_px=p.sigma_px, sigma_acc=p.sigma_acc, sigma_twist=p.sigma_twist, sigma_acc_torso=p.sigma_acc_torso,
                 sigma_sil=p.sigma_sil)
     offsets = point_offsets_of(p)

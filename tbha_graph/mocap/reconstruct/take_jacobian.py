@@ -20,7 +20,8 @@ import numpy as np
 from ..skeleton import N_JOINTS, PARENTS
 from .take_model import (ANKLES, AXIS_TRIPLES, HINGES, J, N_BONES, N_COVER, N_FRAME_RES, N_SIL, PELVIS_JOINTS, PELVIS_SIDE,
                          PER_FRAME, SIL_PAIRS, THORAX_JOINTS, TORSO_PAIRS, TakeProblem, bottom_residual, cover_residuals,
-                         cover_segments, robust_slope, sil_residuals, torso_unseen, unit, unseen_points)
+                         cover_segments, robust_slope, sil_residuals, torso_unseen, unit, unseen_points,
+                         upright_residual)
 
 _EYE = np.eye(3)
 
@@ -164,6 +165,14 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
         row += 1  # the outline covered: each sample's distance to its nearest segment
         cov = _cover(prob, P, g, rows)
         out[:, row:row + N_COVER] = cov["dP"]
+        row += N_COVER  # the spine upright on head-only frames: d|h| = (h/|h|)ᵀ (I - up upᵀ) U (dP_neck - dP_hips)
+        _, up = upright_residual(P, d.subset(rows), w)
+        gh = up["h"] / np.maximum(up["s"], 1e-12)[:, None]
+        gh = (gh - (gh @ up["up"])[:, None] * up["up"]) * (up["on"] / w.sigma_upright)[:, None]
+        U = unit_jacobian(P[:, J["neck"]] - P[:, J["hips"]])[1]
+        du = (gh[:, None, :] @ U)[:, 0]
+        out[:, row, J["neck"]] += du
+        out[:, row, J["hips"]] -= du
         if parts is not None:
             parts["bottom"] = np.concatenate([bot["dr_dS"], bot["dlogf"][:, None], bot["A"]], axis=1)
             parts["sil_dlogf"] = sil["dlogf"]
