@@ -11,7 +11,7 @@ import numpy as np
 
 from tbha_graph.mocap.reconstruct.solve_take import contacts_from_image, rest_pair_distances
 from tbha_graph.mocap.reconstruct.take_jacobian import joint_jacobian, residual_jacobian
-from tbha_graph.mocap.reconstruct.take_model import (DEFAULT_POINT_OFFSETS, HINGES, N_FRAME_RES, N_SIL, PER_FRAME,
+from tbha_graph.mocap.reconstruct.take_model import (DEFAULT_POINT_OFFSETS, HINGES, N_COVER, N_FRAME_RES, N_SIL, PER_FRAME,
                                                      TORSO_PAIRS, SilhouetteField, TakeData, TakeProblem, Weights,
                                                      bone_directions, pack_initial, point_positions)
 from tbha_graph.mocap.segment.silhouette import distance_outside
@@ -21,12 +21,14 @@ KINDS = {"reprojection": slice(0, 32), "torso": slice(32, 32 + len(TORSO_PAIRS))
          "hinge": slice(43, 43 + len(HINGES)), "below_floor": slice(47, 49), "contact": slice(49, 51),
          "head": slice(51, 54), "twist": slice(54, 57), "silhouette": slice(N_FRAME_RES, N_FRAME_RES + N_SIL - 4),
          "support": slice(N_FRAME_RES + N_SIL - 4, N_FRAME_RES + N_SIL - 3), "away": slice(N_FRAME_RES + N_SIL - 3, N_FRAME_RES + N_SIL - 1),
-         "bottom": slice(N_FRAME_RES + N_SIL - 1, N_FRAME_RES + N_SIL)}
+         "bottom": slice(N_FRAME_RES + N_SIL - 1, N_FRAME_RES + N_SIL), "cover": slice(N_FRAME_RES + N_SIL, N_FRAME_RES + N_SIL + N_COVER),
+         "upright": slice(N_FRAME_RES + N_SIL + N_COVER, N_FRAME_RES + N_SIL + N_COVER + 1)}
 
 
-def thin_silhouettes(uv: np.ndarray, scale: float = 0.5, shape=(240, 320)) -> SilhouetteField:
-    """Distance-outside fields of stick figures (bones 1 px wide at ``scale``) through the 2D joints ``uv``
-    ``(n, 16, 2)``: most of a turned limb's points fall outside them."""
+def thin_silhouettes(uv: np.ndarray, scale: float = 0.5, shape=(240, 320), ghost: float = 0.0, width: int = 1) -> SilhouetteField:
+    """Distance-outside fields of stick figures (bones ``width`` px wide at ``scale``) through the 2D joints ``uv``
+    ``(n, 16, 2)``: most of a turned limb's points fall outside them; ``ghost`` px (if not 0): a second right leg
+    drawn that far right of the first (a limb the model lacks: the cover term's samples on it are uncovered)."""
     import cv2
 
     from tbha_graph.mocap.skeleton import PARENTS
@@ -35,7 +37,12 @@ def thin_silhouettes(uv: np.ndarray, scale: float = 0.5, shape=(240, 320)) -> Si
     for q in np.round((uv + 0.5) * scale - 0.5).astype(int):
         m = np.zeros(shape, np.uint8)
         for j in range(1, 16):
-            cv2.line(m, tuple(q[PARENTS[j]]), tuple(q[j]), 255, 1)
+            cv2.line(m, tuple(q[PARENTS[j]]), tuple(q[j]), 255, width)
+        if ghost:
+            g = q + np.array([int(round(ghost * scale)), 0])
+            g[0] = q[0]  # joined to the body at the hips (the cover term follows the largest region's outline)
+            for j in (13, 14, 15):
+                cv2.line(m, tuple(g[PARENTS[j]]), tuple(g[j]), 255, width)
         fields.append(distance_outside(m))
     bottom = uv[:, [12, 15], 1].max(axis=1) + 25.0  # the lowest row 25 px below the lower ankle: the bottom term active
     bottom[::4] = np.nan  # and unknown on some frames
@@ -56,19 +63,21 @@ def test_analytic_frame_jacobian_equals_central_differences():
     weight = np.ones(uv.shape[:2])
     weight[::3, 9] = 0.0  # untracked points
     weight[1::2, 4:] = 0.0  # limbs untracked on every other frame: the silhouette's term applies to their points
+    weight[1::4, :3] = 0.0  # and the whole torso on every fourth: the cover term applies there
     contact = contacts_from_image(uv, weight > 0, fps)
     contact[::2] = True
     joints_uv = 700.0 * P[..., :2] / P[..., 2:3] + centre
-    data = TakeData(uv, weight, L, centre, fps, 0.08, contact, rest_pair_distances(L, 0.08),
-                    silhouette=thin_silhouettes(joints_uv), away=np.arange(n) % 2 == 0)
     nf, d = R[:, 1], float(-R[:, 1] @ t)
-    prob = TakeProblem(data, bone_directions(P), nf, Weights(sigma_twist=0.2, support_band=-0.03), DEFAULT_POINT_OFFSETS.copy(), free_offsets=False)
+    data = TakeData(uv, weight, L, centre, fps, 0.08, contact, rest_pair_distances(L, 0.08),
+                    silhouette=thin_silhouettes(joints_uv, ghost=60.0), away=np.arange(n) % 2 == 0, up=-nf)
+    prob = TakeProblem(data, bone_directions(P), nf, Weights(sigma_twist=0.2, support_band=-0.03, upright_sin=0.15),
+                       DEFAULT_POINT_OFFSETS.copy(), free_offsets=False)
     g = np.array([np.log(700.0), 0.0, 0.0, d - 0.04])  # the floor 4 cm up: some ankles below it
     fr = pack_initial(P, prob.ref).reshape(n, PER_FRAME)
     fr[:, 3:] += rng.normal(scale=0.35, size=(n, PER_FRAME - 3))  # bones turned ~20 degrees: hinges bent wrongly
     h = 1e-6
     F = prob.n_frame_res
-    assert F == N_FRAME_RES + N_SIL
+    assert F == N_FRAME_RES + N_SIL + N_COVER + 1
     num = np.empty((n, F, PER_FRAME))
     for i in range(PER_FRAME):
         fp, fm = fr.copy(), fr.copy()
@@ -86,6 +95,11 @@ def test_analytic_frame_jacobian_equals_central_differences():
     assert (away[::2] > 0).mean() > 0.5 and not away[1::2].any()  # the sample faces the camera: active where flagged
     bottom = prob.frame_terms(Pj, g)[:, KINDS["bottom"]]
     assert (bottom > 0).mean() > 0.3 and not bottom[::4].any()  # measured 0.43
+    upright = prob.frame_terms(Pj, g)[:, KINDS["upright"]]
+    assert (upright[::2] > 0).mean() > 0.6 and not upright[1::2].any()  # measured 0.93; only where flagged away
+    cover = prob.frame_terms(Pj, g)[:, KINDS["cover"]]
+    assert not cover[weight[:, 1] > 0].any()  # only where the torso is not seen
+    assert (cover[1::4] > 0).mean() > 0.22 and (cover > prob.w.robust_scale).any()  # measured 0.33, some beyond the soft-L1 scale
     for kind, rows in KINDS.items():
         a, b = ana[:, rows], num[:, rows]
         assert np.abs(b).max() > 0.1, f"{kind}: not active in this test"
@@ -93,3 +107,28 @@ def test_analytic_frame_jacobian_equals_central_differences():
         # entries; away from them the two agree to ~1e-7 of the largest entry (measured 3e-7 at most)
         close = np.abs(a - b) <= 1e-6 * np.abs(b).max()
         assert close.mean() > 0.995, f"{kind}: {close.mean():.4f} of entries agree"
+
+
+def test_cover_term_finds_a_leg_swung_into_depth():
+    """The outline of the true pose is covered by it (no cost); the same pose with its right leg swung into
+    depth (inside the outline, where the inside term sees nothing) leaves the outline's leg uncovered."""
+    from tbha_graph.mocap.reconstruct.take_model import cover_residuals, torso_unseen
+
+    with np.load(TRUTH, allow_pickle=False) as z:
+        P = z["joints3d_cam"][40:50].copy()
+    centre = np.array([319.5, 239.5])
+    sil = thin_silhouettes(700.0 * P[..., :2] / P[..., 2:3] + centre, width=9)
+    L = np.r_[0.0, np.median(np.linalg.norm(P[:, 1:] - P[:, [0, 1, 2, 1, 4, 5, 1, 7, 8, 0, 10, 11, 0, 13, 14]], axis=-1), axis=0)]
+    w = Weights()
+    assert torso_unseen(np.zeros((3, 16))).all() and not torso_unseen(np.ones((3, 16))).any()
+    r_true, _ = cover_residuals(P, 700.0, centre, sil, L, w)
+    swung = P.copy()
+    hip = P[:, 13]
+    for j in (14, 15):  # knee and ankle turned 80 degrees about the hip's x axis, into depth
+        v = P[:, j] - hip
+        c, s = np.cos(np.radians(80)), np.sin(np.radians(80))
+        swung[:, j] = hip + np.stack([v[:, 0], c * v[:, 1] - s * v[:, 2], s * v[:, 1] + c * v[:, 2]], axis=1)
+    r_swung, _ = cover_residuals(swung, 700.0, centre, sil, L, w)
+    assert np.abs(r_true).max() == 0.0
+    assert (np.abs(r_swung) > 1.0).sum(axis=1).min() >= 4  # measured 5 samples per frame beyond 1 sigma
+    assert not cover_residuals(swung, 700.0, centre, sil, L, w, mask=np.zeros(10))[0].any()  # masked frames: none

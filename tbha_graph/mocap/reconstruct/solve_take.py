@@ -54,7 +54,15 @@ twist prior (the pelvis faces where the thorax faces, ``sigma_twist`` about 11 d
    defects only pulled: the hop given its focal length 48 -> 52 mm); the floor point below the lower ankle at
    most 8 px higher in the image than the outline's lowest row (else a body farther away and smaller, its head
    on the same pixel, fits inside as well); the lower ankle within 0.1 m of its standing height; and on frames where the head is tracked but
-   no torso patch is, the thorax and pelvis facing at least 120 degrees away from the camera.
+   no torso patch is, the thorax and pelvis facing at least 154 degrees away from the camera and the spine within
+   20 degrees of the vertical (:func:`.take_model.upright_residual`; the floor's normal when the problem is made;
+   without it the back-turned spines leaned 31 degrees, median, the truth's 13). On frames where fewer
+   than 3 of the torso's 7 points are tracked, two more: the model covers the outline (:func:`.take_model.cover_residuals`:
+   32 samples of its contour each within about 0.1 m of a projected bone; the inside term alone let a leg swing
+   into depth, or the torso stay side-on inside a back view's wider outline); and before the pose solve each
+   head-only frame's body is moved along its root's ray to the depth where its lower foot stands on the outline's
+   lowest row (:func:`.take_model.seat_on_outline`; started from the last pose seen, the solve kept a body walking
+   away 1.2 m short; on every torso-unseen frame instead of the head-only ones it placed side views 0.6 m too far).
 5. **World frame.** y up = the floor normal, origin on the floor below the hips on the first frame, z the
    actor's forward on the first frame made horizontal (the actor faces +z in the T-pose).
 
@@ -80,7 +88,7 @@ from ..ports import BODY, CAMERA, MOTION, SIDES, SILHOUETTE, TRACKS2D, report_po
 from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS
 from ..body import DEFAULT_ANKLE_HEIGHT, body_lengths, lengths_to_body, tpose_on_floor
 from .take_model import (ANKLES, DEFAULT_POINT_OFFSETS, TORSO_JOINTS, TORSO_PAIRS, SilhouetteField, TakeData, TakeProblem, Weights,
-                         bone_directions, fronts, pack_initial, point_positions, unit)
+                         bone_directions, fronts, pack_initial, point_positions, seat_on_outline, unit)
 from .take_solver import levenberg_marquardt
 from .take_solver import search_sides_lm as search_sides
 from .temporal_ray_sphere import TemporalRaySphereParams, solve_temporal
@@ -297,7 +305,7 @@ def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: Solve
     contact = np.asarray(contact, dtype=bool)
     data = TakeData(points, weight, lengths, centre, fps, p.ankle_height, contact,
                     rest_pair_distances(lengths, p.ankle_height), silhouette=silhouette,
-                    away=None if silhouette is None else facing_away(weight))
+                    away=None if silhouette is None else facing_away(weight), up=nf)
     w = Weights(sigma_px=p.sigma_px, sigma_acc=p.sigma_acc, sigma_twist=p.sigma_twist, sigma_acc_torso=p.sigma_acc_torso,
                 sigma_sil=p.sigma_sil)
     offsets = point_offsets_of(p)
@@ -528,13 +536,18 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
     if whole and (estimated or p.side_search):  # the pose at the chosen focal length under p's priors: LM,
         f_sel, nf_s, d_s, _, P_s = prob.solution(x)  # the depth-side search on the whole take, LM (focal held)
         g_s = np.concatenate([[np.log(f_sel), 0.0, 0.0, d_s], prob.globals_of(x)[4:]])
+        if sil is not None:  # where only the head is seen, the body first set on the floor at the outline's lowest row
+            P_s = seat_on_outline(P_s, f_sel, centre, nf_s, d_s, sil, facing_away(weight))
         prob, x, cost, ne, kept2 = solve_frames(points, weight, lengths, centre, fps, P_s, (nf_s, d_s), g_s, p,
                                                 p.max_iterations, False, (f_sel, 1e-4), p.side_search, contact,
                                                 tol=POSE_TOL, silhouette=sil)
     elif not whole:  # the same in windows, camera and floor held
         f_sel, nf_s, d_s, _, P_s = prob.solution(x)
         g_s = np.concatenate([[np.log(f_sel), 0.0, 0.0, d_s], prob.globals_of(x)[4:]])
-        P_w, kept2, report["windows"] = solve_windows(points, weight, lengths, centre, fps, interpolate_joints(P_s, cam_rows, n),
+        P_w = interpolate_joints(P_s, cam_rows, n)
+        if sil is not None:
+            P_w = seat_on_outline(P_w, f_sel, centre, nf_s, d_s, sil, facing_away(weight))
+        P_w, kept2, report["windows"] = solve_windows(points, weight, lengths, centre, fps, P_w,
                                    (nf_s, d_s), g_s, p, contact, p.window_frames, p.window_overlap, progress, sil)
         prob, _ = make_problem(points, weight, lengths, centre, fps, P_w, (nf_s, d_s), p, False, None, contact, g_s, sil)
         x = pack_initial(P_w, prob.ref)

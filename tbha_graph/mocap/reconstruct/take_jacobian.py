@@ -18,9 +18,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..skeleton import N_JOINTS, PARENTS
-from .take_model import (ANKLES, AXIS_TRIPLES, HINGES, J, N_BONES, N_FRAME_RES, PELVIS_JOINTS, PELVIS_SIDE, PER_FRAME,
-                         SIL_PAIRS, THORAX_JOINTS, TORSO_PAIRS, TakeProblem, bottom_residual, robust_slope, sil_residuals, unit,
-                         unseen_points)
+from .take_model import (ANKLES, AXIS_TRIPLES, HINGES, J, N_BONES, N_COVER, N_FRAME_RES, N_SIL, PELVIS_JOINTS, PELVIS_SIDE,
+                         PER_FRAME, SIL_PAIRS, THORAX_JOINTS, TORSO_PAIRS, TakeProblem, bottom_residual, cover_residuals,
+                         cover_segments, robust_slope, sil_residuals, torso_unseen, unit, unseen_points,
+                         upright_residual)
 
 _EYE = np.eye(3)
 
@@ -161,10 +162,52 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
         proj = _EYE - nf[:, None] * nf[None, :]  # dS / dP_a
         for k, a in enumerate(ANKLES):
             out[:, row, a] += (bot["dr_dS"] @ proj) * (bot["k"] == k)[:, None]
+        row += 1  # the outline covered: each sample's distance to its nearest segment
+        cov = _cover(prob, P, g, rows)
+        out[:, row:row + N_COVER] = cov["dP"]
+        row += N_COVER  # the spine upright on head-only frames: d|h| = (h/|h|)ᵀ (I - up upᵀ) U (dP_neck - dP_hips)
+        _, up = upright_residual(P, d.subset(rows), w)
+        gh = up["h"] / np.maximum(up["s"], 1e-12)[:, None]
+        gh = (gh - (gh @ up["up"])[:, None] * up["up"]) * (up["on"] / w.sigma_upright)[:, None]
+        U = unit_jacobian(P[:, J["neck"]] - P[:, J["hips"]])[1]
+        du = (gh[:, None, :] @ U)[:, 0]
+        out[:, row, J["neck"]] += du
+        out[:, row, J["hips"]] -= du
         if parts is not None:
             parts["bottom"] = np.concatenate([bot["dr_dS"], bot["dlogf"][:, None], bot["A"]], axis=1)
             parts["sil_dlogf"] = sil["dlogf"]
+            parts["cover_dlogf"] = cov["dlogf"]
     return out
+
+
+def _pinhole(X: np.ndarray, f: float) -> np.ndarray:
+    """``d uv / d X`` ``(..., 2, 3)`` of the projection ``uv = f X_xy / max(z, 1e-3) + c`` at points ``X`` ``(..., 3)``."""
+    zc = X[..., 2]
+    z = np.maximum(zc, 1e-3)
+    out = np.zeros(X.shape[:-1] + (2, 3))
+    out[..., 0, 0] = out[..., 1, 1] = f / z
+    out[..., :, 2] = -f * X[..., :2] / (z ** 2)[..., None] * (zc >= 1e-3)[..., None]
+    return out
+
+
+def _cover(prob: TakeProblem, P: np.ndarray, g: np.ndarray, rows: slice) -> dict:
+    """The cover residuals' (:func:`.take_model.cover_residuals`) derivatives by the joints ``dP``
+    ``(n, N_COVER, 16, 3)`` and by ``log f`` ``dlogf`` ``(n, N_COVER)``: a sample's distance to its nearest
+    segment moves with the segment's nearest point, ``(1 - t)`` of the image of end A and ``t`` of B's (the
+    position along it is optimal, so its own change costs nothing), through the pinhole at each end and the
+    ends' joint weights."""
+    w, d = prob.w, prob.d
+    f = np.exp(g[0])
+    _, pc = cover_residuals(P, f, d.centre, d.silhouette, d.lengths, w, rows, mask=torso_unseen(d.weight[rows]))
+    s, t, k = pc["s"], pc["t"], pc["drho"][..., None] * pc["g"]  # k: d r / d (nearest point), (n, K, 2)
+    pick = lambda v: np.take_along_axis(v, s[..., None], axis=1)  # noqa: E731 - (n, 15, c) -> (n, K, c)
+    ka, kb = (1.0 - t)[..., None] * k, t[..., None] * k
+    GA = (ka[..., None, :] @ _pinhole(pick(pc["A"]), f))[..., 0, :]  # (n, K, 3)
+    GB = (kb[..., None, :] @ _pinhole(pick(pc["B"]), f))[..., 0, :]
+    a, b = cover_segments(d.lengths)
+    dP = np.einsum("nkj,nkc->nkjc", a[s], GA) + np.einsum("nkj,nkc->nkjc", b[s], GB)
+    dlogf = np.sum(ka * (pick(pc["ua"]) - d.centre) + kb * (pick(pc["ub"]) - d.centre), axis=-1)
+    return {"dP": dP, "dlogf": dlogf}
 
 
 def _bottom(prob: TakeProblem, P: np.ndarray, g: np.ndarray, rows: slice) -> dict:
@@ -284,6 +327,7 @@ def global_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: dict
     Jf[:, : 2 * N_JOINTS, 0] = parts["dlogf"].reshape(n, -1)
     if "sil_dlogf" in parts:  # the silhouette's points scale about the centre too; the support moves with the floor
         Jf[:, N_FRAME_RES:N_FRAME_RES + len(SIL_PAIRS), 0] = parts["sil_dlogf"]
+        Jf[:, N_FRAME_RES + N_SIL:N_FRAME_RES + N_SIL + N_COVER, 0] = parts["cover_dlogf"]
     # floor: ankle heights h = P_a . nf + d and the slides' horizontal projection
     f1 = unit_jacobian(prob.n_ref + g[1] * prob.f1 + g[2] * prob.f2)[1] @ np.stack([prob.f1, prob.f2], axis=1)  # (3, 2)
     nf, dfl = prob.floor(g)
@@ -303,7 +347,7 @@ def global_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: dict
         dr_dS, dlf, A = bt[:, :3], bt[:, 3], bt[:, 4:]
         hA = A @ nf + dfl
         dSdn = -(nf[None, :, None] * A[:, None, :] + hA[:, None, None] * _EYE)  # (n, 3, 3)
-        col = F - 1
+        col = N_FRAME_RES + N_SIL - 1
         Jf[:, col, 0] = dlf
         Jf[:, col, 1:3] = ((dr_dS[:, None, :] @ dSdn)[:, 0]) @ f1
         Jf[:, col, 3] = -(dr_dS @ nf)
