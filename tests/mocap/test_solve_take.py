@@ -319,7 +319,7 @@ def test_seat_on_outline_puts_the_body_back_at_its_depth(truth):
 def test_turn_search_turns_back_a_body_turned_the_wrong_way(truth):
     """The turn search (take_solver.search_turns_lm): on 20 frames where no torso point is tracked, the sample's
     true body turned 180 degrees about the vertical through its root (its limbs then miss their tracks) is
-    turned back (after the search's 3 iterations, within 10 cm, from 30 cm off), and frames outside the run and its
+    turned back (after the search's LM steps, within 10 cm, from 30 cm off), and frames outside the run and its
     margins stay as they were."""
     from tbha_graph.mocap.reconstruct.take_model import TORSO_JOINTS, torso_unseen
     from tbha_graph.mocap.reconstruct.take_solver import search_turns_lm, turned

@@ -65,9 +65,10 @@ twist prior (the pelvis faces where the thorax faces, ``sigma_twist`` about 11 d
    away 1.2 m short; on every torso-unseen frame instead of the head-only ones it placed side views 0.6 m too far).
    After the depth-side search, the turn search (:func:`.take_solver.search_turns_lm`): on each run of
    torso-unseen frames, whole and in pieces of 24 and 12 frames, the body turned about the vertical by 90, 180,
-   270 degrees and to the mirror of its heading about the viewing direction, each re-optimised, the cheapest
+   270 degrees and to the mirror of its heading about the viewing direction, the cheapest
    kept (a side view facing left or right, or a turn one way round or the other, gives nearly the same outline;
-   measured on ``bench/labelling.py``'s six takes: mean seq-MPJPE 170.5 -> 168.9 mm, 186.2 -> 180.2 given the focal length).
+   each pass's candidates re-optimised for 6 steps; measured on ``bench/labelling.py``'s six takes: mean seq-MPJPE
+   170.5 -> 156.0 mm, 186.2 -> 168.7 given the focal length).
 5. **World frame.** y up = the floor normal, origin on the floor below the hips on the first frame, z the
    actor's forward on the first frame made horizontal (the actor faces +z in the T-pose).
 

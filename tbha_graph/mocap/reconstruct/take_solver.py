@@ -428,11 +428,14 @@ MIRROR = -1.0
 #: Window lengths (frames) of the turn search's passes (:func:`search_turns_lm`): the whole run first (0),
 #: then pieces of this many frames
 TURN_WINDOWS = (0, 24, 12)
+#: LM steps on each pass's candidates in :func:`search_turns_lm`: measured on ``bench/labelling.py``'s six takes,
+#: mean seq-MPJPE (focal estimated / given) 3: 168.9 / 180.2 mm, 6: 156.0 / 168.7, 10: 176.1 / 164.2
+TURN_ITERATIONS = 6
 #: The turns tried on each window, degrees about the vertical
 TURN_ANGLES = (90.0, 180.0, 270.0, MIRROR)
 
 
-def search_turns_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, mask: np.ndarray, iterations: int = 3,
+def search_turns_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, mask: np.ndarray, iterations: int = TURN_ITERATIONS,
                     margin: int = 3, windows: tuple[int, ...] = TURN_WINDOWS,
                     angles: tuple[float, ...] = TURN_ANGLES) -> tuple[np.ndarray, int]:
     """Discrete search over the body's heading where the image does not fix it (the torso unseen: a body seen
