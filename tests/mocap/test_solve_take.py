@@ -314,3 +314,24 @@ def test_seat_on_outline_puts_the_body_back_at_its_depth(truth):
     err = np.abs(out[..., 2] - P[..., 2]).max(axis=1)
     assert err[mask].max() < 0.011  # measured 7 mm at most (the scales tried are 0.46 % apart)
     assert np.array_equal(out[~mask], moved[~mask])
+
+
+def test_turn_search_turns_back_a_body_turned_the_wrong_way(truth):
+    """The turn search (take_solver.search_turns_lm): on 20 frames where no torso point is tracked, the sample's
+    true body turned 180 degrees about the vertical through its root (its limbs then miss their tracks) is
+    turned back (after the search's LM steps, within 10 cm, from 30 cm off), and frames outside the run and its
+    margins stay as they were."""
+    from tbha_graph.mocap.reconstruct.take_model import TORSO_JOINTS, torso_unseen
+    from tbha_graph.mocap.reconstruct.take_solver import search_turns_lm, turned
+
+    P, uv, centre, L = synthetic(truth, 40)
+    prob, d = problem(truth, P, uv, centre, L, Weights(sigma_acc_torso=5.0))
+    run = np.arange(12, 32)
+    prob.d.weight[np.ix_(run, TORSO_JOINTS)] = 0.0
+    prob.d.up = prob.floor(globals_vector(700.0, d, False))[0]
+    wrong = turned(P, run, prob.d.up, np.full(len(run), np.pi))
+    assert np.linalg.norm(wrong[run] - P[run], axis=-1).mean() > 0.3
+    out, kept = search_turns_lm(prob, wrong, globals_vector(700.0, d, False), torso_unseen(prob.d.weight))
+    assert kept >= 1
+    assert np.linalg.norm(out[run] - P[run], axis=-1).mean() < 0.1
+    assert np.array_equal(out[:8], wrong[:8]) and np.array_equal(out[36:], wrong[36:])

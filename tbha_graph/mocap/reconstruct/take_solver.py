@@ -297,6 +297,34 @@ def flip_segments(P: np.ndarray, j: int, min_tilt: float = 0.12) -> list[np.ndar
     return segs
 
 
+def solve_candidates(prob: TakeProblem, g: np.ndarray, wins: list, iterations: int) -> list:
+    """Candidates for windows of a take re-optimised together: ``wins`` ``[(lo, hi, [Q, ...]), ...]``, each ``Q``
+    ``(n, 16, 3)`` joints (camera frame) of which frames ``lo:hi`` are a candidate; all windows' candidates are
+    solved for ``iterations`` LM steps, globals ``g`` held, as independent segments of one problem
+    (``TakeData.breaks``). Returns per window ``(joints (k, hi - lo, 16, 3), costs (k,))`` of its ``k`` candidates
+    (:func:`joints_cost` summed over the window)."""
+    parts, idx, breaks = [], [], []
+    for lo, hi, qs in wins:
+        for Q in qs:
+            parts.append(Q[lo:hi])
+            idx.append(np.arange(lo, hi))
+            breaks.append(np.r_[True, np.zeros(hi - lo - 1, dtype=bool)])
+    Pst = np.concatenate(parts)
+    data = prob.d.subset(np.concatenate(idx), breaks=np.concatenate(breaks))
+    ref = bone_directions(Pst)
+    wp = TakeProblem(data, ref, prob.floor(g)[0], prob.w, prob.offsets0, fixed_globals=g,
+                     free_offsets=prob.layout.free_offsets, free_lengths=prob.layout.free_lengths)
+    x, _, _, _ = levenberg_marquardt(wp, pack_initial(Pst, ref), iterations)
+    Pout = wp.joints_from_frames(wp.frames_of(x), prob.lengths_of(g))
+    cost = joints_cost(wp, Pout, g)
+    out, start = [], 0
+    for lo, hi, qs in wins:
+        m, k = hi - lo, len(qs)
+        out.append((Pout[start:start + k * m].reshape(k, m, N_JOINTS, 3), cost[start:start + k * m].reshape(k, m).sum(axis=1)))
+        start += k * m
+    return out
+
+
 #: Bones whose depth side is searched together: both hip joints (the pelvis turned one way or the mirror way),
 #: both shoulders (the thorax likewise), then each limb bone and the head on its own.
 SIDE_GROUPS: tuple[tuple[int, ...], ...] = (
@@ -330,9 +358,7 @@ def search_sides_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, iterations:
     of one problem (``TakeData.breaks``) — and each mirror is kept when it ends cheaper than the current run.
     Returns the joints and the number of mirrors kept."""
     P = P.copy()
-    nf = prob.floor(g)[0]
     L = prob.lengths_of(g)
-    d = prob.d
     n = P.shape[0]
     kept = 0
     for group in groups:
@@ -343,28 +369,104 @@ def search_sides_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, iterations:
             wins.append((max(seg[0] - margin, 0), min(seg[-1] + 1 + margin, n), seg))
         if not wins:
             continue
-        parts, idx, breaks = [], [], []
-        for lo, hi, seg in wins:
-            trial = mirror(P, seg, group, L)
-            for Q in (P, trial):
-                parts.append(Q[lo:hi])
-                idx.append(np.arange(lo, hi))
-                breaks.append(np.r_[True, np.zeros(hi - lo - 1, dtype=bool)])
-        rows = np.concatenate(idx)
-        Pst = np.concatenate(parts)
-        data = d.subset(rows, breaks=np.concatenate(breaks))
-        ref = bone_directions(Pst)
-        wp = TakeProblem(data, ref, nf, prob.w, prob.offsets0, fixed_globals=g, free_offsets=prob.layout.free_offsets,
-                         free_lengths=prob.layout.free_lengths)
-        x, _, _, _ = levenberg_marquardt(wp, pack_initial(Pst, ref), iterations)
-        Pout = wp.joints_from_frames(wp.frames_of(x), L)
-        cost = joints_cost(wp, Pout, g)
-        start = 0
-        for lo, hi, seg in wins:
-            m = hi - lo
-            c_cur, c_new = cost[start:start + m].sum(), cost[start + m:start + 2 * m].sum()
-            if c_new < c_cur:
-                P[lo:hi] = Pout[start + m:start + 2 * m]
+        picks = solve_candidates(prob, g, [(lo, hi, [P, mirror(P, seg, group, L)]) for lo, hi, seg in wins], iterations)
+        for (lo, hi, _), (outs, cost) in zip(wins, picks):
+            if cost[1] < cost[0]:
+                P[lo:hi] = outs[1]
                 kept += 1
-            start += 2 * m
+    return P, kept
+
+
+def runs_of(mask: np.ndarray, min_len: int = 2) -> list[np.ndarray]:
+    """Runs ``[frames, ...]`` of consecutive True frames of ``mask`` ``(n,)`` at least ``min_len`` long."""
+    m = np.r_[False, np.asarray(mask, bool), False].astype(np.int8)
+    edges = np.flatnonzero(np.diff(m))
+    return [np.arange(a, b) for a, b in zip(edges[::2], edges[1::2]) if b - a >= min_len]
+
+
+
+def turned(P: np.ndarray, frames: np.ndarray, up: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """``P`` ``(n, 16, 3)`` (camera frame, metres) with the body on ``frames`` ``(k,)`` turned, rigidly, about the
+    vertical ``up`` ``(3,)`` through its root by ``angle`` ``(k,)`` radians (right-handed about ``up``)."""
+    up = unit(np.asarray(up, dtype=np.float64))
+    root = P[frames, 0][:, None]
+    X = P[frames] - root
+    c, s = np.cos(angle)[:, None, None], np.sin(angle)[:, None, None]
+    X = X * c + np.cross(up, X) * s + (X @ up)[..., None] * up * (1.0 - c)  # Rodrigues about up
+    out = P.copy()
+    out[frames] = X + root
+    return out
+
+
+def turn_windows(mask: np.ndarray, window: int) -> list[np.ndarray]:
+    """The runs of ``mask`` ``(n,)`` (:func:`runs_of`) cut into windows of about ``window`` frames (a run of
+    ``m`` frames into ``round(m / window)`` nearly equal pieces, at least one)."""
+    out = []
+    for r in runs_of(mask):
+        k = max(int(round(len(r) / window)), 1)
+        out.extend(np.array_split(r, k))
+    return out
+
+
+def mirror_turn(P: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """Angles ``(n,)`` radians about the vertical ``up`` ``(3,)`` that turn each frame's body ``P`` ``(n, 16, 3)``
+    (camera frame) to the mirror of its heading about the viewing direction (the horizontal direction from the
+    camera to the root): a front (the thorax's plus the pelvis's, :func:`.take_model.fronts`, made horizontal)
+    at angle ``a`` from it goes to ``-a`` — seen side-on facing left becomes facing right."""
+    from .take_model import fronts
+
+    up = unit(np.asarray(up, dtype=np.float64))
+    th, pe = fronts(P)
+    f = th + pe
+    f = unit(f - (f @ up)[:, None] * up)
+    v = unit(P[:, 0] - (P[:, 0] @ up)[:, None] * up)
+    return -2.0 * np.arctan2(np.cross(v, f) @ up, np.sum(v * f, axis=-1))
+
+
+#: In :data:`TURN_ANGLES`: each frame turned to the mirror of its heading about the viewing direction (:func:`mirror_turn`)
+MIRROR = -1.0
+#: Window lengths (frames) of the turn search's passes (:func:`search_turns_lm`): the whole run first (0),
+#: then pieces of this many frames
+TURN_WINDOWS = (0, 24, 12)
+#: LM steps on each pass's candidates in :func:`search_turns_lm`: measured on ``bench/labelling.py``'s six takes,
+#: mean seq-MPJPE (focal estimated / given) 3: 168.9 / 180.2 mm, 6: 156.0 / 168.7, 10: 176.1 / 164.2
+TURN_ITERATIONS = 6
+#: The turns tried on each window, degrees about the vertical
+TURN_ANGLES = (90.0, 180.0, 270.0, MIRROR)
+
+
+def search_turns_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, mask: np.ndarray, iterations: int = TURN_ITERATIONS,
+                    margin: int = 3, windows: tuple[int, ...] = TURN_WINDOWS,
+                    angles: tuple[float, ...] = TURN_ANGLES) -> tuple[np.ndarray, int]:
+    """Discrete search over the body's heading where the image does not fix it (the torso unseen: a body seen
+    side-on facing left or right, or turning round one way or the other, gives nearly the same outline and
+    head). For each pass (``windows``: 0 = each run of ``mask`` ``(n,)`` whole, else pieces of that many
+    frames, :func:`turn_windows`) and each window the whole body is turned about the vertical through its
+    root by each of ``angles`` (degrees; :func:`turned`), ramped in over ``margin`` frames either side; the
+    current and the turned copies of the window with its margins are re-optimised for ``iterations`` steps
+    with the globals ``g`` held — all windows and angles of a pass at once, as independent segments of one
+    problem (``TakeData.breaks``) — and the cheapest kept. Needs ``prob.d.up`` (the vertical); ``P``
+    ``(n, 16, 3)`` camera frame, metres. Returns the joints and the number of turns kept."""
+    if prob.d.up is None:
+        return P, 0
+    P = P.copy()
+    n = P.shape[0]
+    kept = 0
+    for window in windows:
+        wins = [(max(r[0] - margin, 0), min(r[-1] + 1 + margin, n), r)
+                for r in (runs_of(mask) if window == 0 else turn_windows(mask, window))]
+        if not wins:
+            continue
+        cands = []
+        for lo, hi, run in wins:
+            fr = np.arange(lo, hi)
+            ramp = np.clip(np.minimum(fr - lo + 1, hi - fr) / (min(run[0] - lo, hi - 1 - run[-1]) + 1.0), 0.0, 1.0)
+            ramp[(fr >= run[0]) & (fr <= run[-1])] = 1.0
+            turns = [mirror_turn(P[fr], prob.d.up) if a == MIRROR else np.full(hi - lo, np.radians(a)) for a in angles]
+            cands.append((lo, hi, [P] + [turned(P, fr, prob.d.up, t * ramp) for t in turns]))
+        for (lo, hi, _), (outs, cost) in zip(wins, solve_candidates(prob, g, cands, iterations)):
+            b = int(np.argmin(cost))
+            if b > 0:
+                P[lo:hi] = outs[b]
+                kept += 1
     return P, kept
