@@ -218,10 +218,8 @@ def _bottom(prob: TakeProblem, P: np.ndarray, g: np.ndarray, rows: slice) -> dic
     nf, dfl = prob.floor(g)
     _, pc = bottom_residual(P, f, d.centre, nf, dfl, d.silhouette, w, rows)
     S, k = pc["S"], pc["k"]
-    zc = S[:, 2]
-    z = np.maximum(zc, 1e-3)
-    dv = np.stack([np.zeros_like(z), f / z, -f * S[:, 1] / z ** 2 * (zc >= 1e-3)], axis=1)  # d v / d S
-    dr = -pc["drho"][:, None] * dv
+    z = np.maximum(S[:, 2], 1e-3)
+    dr = -pc["drho"][:, None] * _pinhole(S, f)[:, 1]  # d v / d S
     return {"dr_dS": dr, "dlogf": -pc["drho"] * f * S[:, 1] / z, "k": k, "A": P[:, ANKLES][np.arange(P.shape[0]), k]}
 
 
@@ -269,15 +267,11 @@ def _reprojection(prob: TakeProblem, P, g, thorax, d_thorax, pelvis, d_pelvis, o
     d_axis = o_al * A + o_out * (O @ -M @ A)  # dQ per unit change of the axis' sum s, (n, 16, 3, 3)
     Q = P + offs[:, 0][None, :, None] * axis + offs[:, 1][None, :, None] * outv
     # d rep / dQ: soft-L1 of (f Q_xy / z + c - obs) * weight / sigma
-    zc = Q[..., 2]
-    z = np.maximum(zc, 1e-3)
+    z = np.maximum(Q[..., 2], 1e-3)
     s = d.weight[rows] / w.sigma_px  # (n, 16)
     e = ((f * Q[..., :2] / z[..., None] + d.centre) - d.points[rows]) * s[..., None]
     drho = robust_slope(e, w.robust_scale)
-    de = np.zeros((n, N_JOINTS, 2, 3))
-    de[..., 0, 0] = de[..., 1, 1] = f / z
-    de[..., :, 2] = -(f * Q[..., :2] / z[..., None] ** 2) * (zc >= 1e-3)[..., None]
-    Gq = (drho * s[..., None])[..., None] * de  # (n, 16, 2, 3)
+    Gq = (drho * s[..., None])[..., None] * _pinhole(Q, f)  # (n, 16, 2, 3)
     rows = np.arange(N_JOINTS)
     view = out[:, : 2 * N_JOINTS].reshape(n, N_JOINTS, 2, N_JOINTS, 3)
 
