@@ -592,10 +592,16 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
     )
     # a second start ending at a clearly different focal length at a similar cost: the take cannot tell them apart
     rivals = [fe for f0, fe, c in sweep if abs(np.log(fe / f)) > np.log(1.1) and c < (1 + RIVAL_COST) * min(c2 for _, _, c2 in sweep)]
+    if estimated:
+        # the focal lengths the starts and cross seeds found about as cheap as the cheapest: how far the take leaves
+        # the focal length open (the Jacobian's focal_sd_pct is the curvature at one minimum and understates it)
+        near = [f] + [fe for _, fe, c in sweep if c < (1 + RIVAL_COST) * min(c2 for _, _, c2 in sweep)]
+        report["focal_fits_px_min"], report["focal_fits_px_max"] = round(min(near), 1), round(max(near), 1)
     if rivals:
         report["focal_rivals_px"] = [round(r, 1) for r in rivals]
-        warnings_out.append(f"the focal length is ambiguous: {f:.0f} px fits, but so does {rivals[0]:.0f} px about as well; "
-                            "3D positions scale with it — give the camera's focal length (focal_px) if you know it")
+        warnings_out.append(f"the focal length is ambiguous: {f:.0f} px fits, but so does {rivals[0]:.0f} px about as well "
+                            f"(anything from {min(near):.0f} to {max(near):.0f} px); 3D positions scale with it — give the "
+                            "camera's focal length (focal_px) if you know it")
     if not np.isfinite(focal_sd_pct) or focal_sd_pct > 5.0:
         warnings_out.append(f"the focal length is uncertain: {f:.0f} px ± {focal_sd_pct:.1f} % (1 sd); the take may "
                             "lack depth motion (walk towards or away from the camera, turn) — give focal_px if known")
