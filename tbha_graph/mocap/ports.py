@@ -16,6 +16,7 @@ stated.
 * ``DETECTIONS``: candidate patch regions per frame and colour class (:mod:`.bundles.detections`).
 * ``TRACKS2D``: 2D joint tracks in pixels (:mod:`.bundles.tracks`).
 * ``CAMERA``: :class:`~tbha_graph.mocap.camera.CameraModel` (``.camera()`` gives the working camera).
+* ``LENS``: :class:`~.bundles.lens.LensEstimate`, a focal length (px, with its sd) found before the take is solved.
 * ``BODY``: :class:`~.body.Body`, bone lengths in metres (:mod:`tbha_graph.mocap.body`).
 * ``SUIT``: :class:`~tbha_graph.mocap.suit.SuitSpec`; ``COLORS``: :class:`~.bundles.colors.ColorModel`,
   the suit's colours in one colour space (:mod:`.bundles.colors`).
@@ -34,6 +35,7 @@ from ..core.types import Array, Arrays, File, Json, Model, PortType
 from .body import Body
 from .bundles.colors import ColorModel
 from .bundles.detections import DETECTION_KEYS
+from .bundles.lens import LensEstimate
 from .bundles.video import VideoClip
 from .camera import CameraModel
 from .skeleton import N_JOINTS
@@ -41,7 +43,7 @@ from .suit import SuitSpec
 
 __all__ = [
     "Bundle", "VideoClip", "VIDEO", "VIDEO_FILE", "DETECTIONS", "TRACKS2D", "CAMERA", "BODY", "SUIT", "COLORS",
-    "MOTION", "ROTATIONS", "TRUTH", "SILHOUETTE", "SIDES", "ERRORS", "SMPL_PARAMS", "JOINTS3D_EXPORT", "METRICS", "REPORT", "report_port",
+    "LENS", "MOTION", "ROTATIONS", "TRUTH", "SILHOUETTE", "SIDES", "ERRORS", "SMPL_PARAMS", "JOINTS3D_EXPORT", "METRICS", "REPORT", "report_port",
     "BVH_FILE", "IMAGE", "MESH", "JOINTS3D", "JOINTS2D",
 ]
 
@@ -85,6 +87,7 @@ SILHOUETTE = Bundle(
         "its area and bottom_px (n_frames,) its lowest image row, full-resolution px",
 )
 CAMERA = Model(CameraModel, doc="calibrated camera")
+LENS = Model(LensEstimate, doc="a focal length estimate (px, with its sd) found before the take is solved, or none")
 BODY = Model(Body, doc="bone lengths {bone: metres}")
 SUIT = Model(SuitSpec, doc="suit colours")
 COLORS = Model(ColorModel, doc="suit colours in a colour space")

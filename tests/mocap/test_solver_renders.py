@@ -3,10 +3,11 @@ sample's (``bench/solver_accuracy.py``'s takes: focal 500-1200 px, 0.9-1.8 m hig
 turns, a hop, a far walk), scored against the renders' truth as ``metrics.json`` scores it.
 
 With the true focal length given the figures are the solver's own; bounds sit about 1.5x above what was
-measured (2026-11-26), so a regression past them is a real loss. With the focal length estimated the
-choice among starting focal lengths is luck (``bench/solver_diagnosis.py``: five starting grids scaled by
-0.9-1.1 gave +1..+18 %, -30..-18 % and -64..-18 % on these takes), so what is asserted there is that the
-run says so (the ambiguity warning) and stays within that measured spread.
+measured (2026-11-26), so a regression past them is a real loss. With the focal length estimated, it comes
+from the room's floor tiles (``calibrate.vanishing_points``) where they give it (131_01, the hop), refined
+by the take; on the far walk the sideways tiles are too nearly parallel for it, the run says so and the take
+alone decides, which is luck (``bench/solver_diagnosis.py``: five starting grids gave -64..-18 % there), so
+what is asserted there is the warnings and the measured spread.
 """
 from __future__ import annotations
 
@@ -57,9 +58,21 @@ def test_render_given_its_focal_length(take, cache):
     assert m["foot_skate_mm"] < 4.7  # measured 2.4-3.2 mm per planted frame
 
 
+#: take -> (|focal error| %, mpjpe mm) bounds with the focal length estimated, and whether the room's lines give it;
+#: measured +3.4 % / 113.1 mm, -3.5 % / 54.5 mm (room lines), -19.3 % / 82.3 mm (the take alone)
+ESTIMATED_BOUNDS = {
+    "walk131_01_f500_low": (5.2, 170.0, True),
+    "hop131_03_f1000_high": (5.2, 82.0, True),
+    "walk131_02_f1200_far": (29.0, 124.0, False),
+}
+
+
 @pytest.mark.parametrize("take", TAKES, ids=[t[0] for t in TAKES])
 def test_render_with_its_focal_length_estimated(take, cache):
     m = capture(take, cache, focal_given=False)
-    assert any("focal length is ambiguous" in w for w in m["warnings"])  # the take does not determine it: said
-    assert abs(m["focal_err_pct"]) < 70.0  # within the measured spread (-64..+18 %): measured +6.6, -23.4, -19.3
-    assert m["mpjpe_mm"] < 220.0  # measured 145.9 / 115.6 / 82.3 mm (the worst of five grids: 166 / 145 / 126)
+    focal, mpjpe, from_room = ESTIMATED_BOUNDS[take[0]]
+    assert m["focal_source"].startswith("room lines") == from_room
+    if not from_room:  # the take alone: both said
+        assert any("no focal length from the room" in w for w in m["warnings"])
+        assert any("focal length is ambiguous" in w for w in m["warnings"])
+    assert abs(m["focal_err_pct"]) < focal and m["mpjpe_mm"] < mpjpe

@@ -90,7 +90,7 @@ from ...core.node import node, optional
 from ..bundles.tracks import read_tracks
 from ..calibrate.pnp import solve_pnp_planar
 from ..camera import Camera
-from ..ports import BODY, CAMERA, MOTION, SIDES, SILHOUETTE, TRACKS2D, report_port
+from ..ports import BODY, CAMERA, LENS, MOTION, SIDES, SILHOUETTE, TRACKS2D, report_port
 from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS
 from ..body import DEFAULT_ANKLE_HEIGHT, body_lengths, lengths_to_body, tpose_on_floor
 from .take_model import (ANKLES, DEFAULT_POINT_OFFSETS, TORSO_JOINTS, TORSO_PAIRS, SilhouetteField, TakeData, TakeProblem, Weights,
@@ -246,6 +246,13 @@ def detect_contacts(P: np.ndarray, nf: np.ndarray, d: float, fps: float, ankle_h
 #: 0.3 % each and moved the joints no closer to the truth (sample 51.9 -> 50.9 mm, 131_01 156 -> 139, the
 #: others unchanged) at 10 % of the solve's time
 POSE_TOL = 1e-3
+
+#: Uncertainty (log sd) added to a lens estimate's own before it is the focal prior: the principal point off the
+#: image centre, lens distortion and not quite perpendicular room lines are not in its bootstrap. Measured on the
+#: sample and two renders with room lines (mpjpe, focal error): this prior 51.4 / 113.1 / 54.5 mm (+0.3 / +3.4 /
+#: -3.5 %); the lens focal held instead 58.0 / 152.6 / 65.4 mm (+0.3 / -0.8 / -3.5 %): the pose search, not the
+#: focal length, makes the difference (131_01 given its true focal length: 94 mm)
+LENS_SD_FLOOR = 0.015
 
 #: Search the body's turning direction on the torso-unseen runs in the final pose solve
 #: (:func:`.take_solver.search_turns_lm`)
@@ -447,10 +454,12 @@ def world_frame(P: np.ndarray, nf: np.ndarray, d: float) -> tuple[np.ndarray, np
 
 def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarray, width: int, height: int,
                       fps: float, p: SolveTakeParams, progress=None, confidence: np.ndarray | None = None,
-                      silhouette: SilhouetteField | None = None) -> dict:
+                      silhouette: SilhouetteField | None = None, lens: tuple[float, float] | None = None) -> dict:
     """The whole solve (see the module docstring) on 2D points ``(n, 16, 2)`` px; ``progress`` (optional, as
     ``ctx.progress``: wraps an iterable) shows the starts and the pose windows; ``silhouette`` (optional) the
-    actor's outline on every frame. Returns a dict with
+    actor's outline on every frame; ``lens`` (optional) a focal length found before, ``(px, sd as a fraction)``:
+    without ``p.focal_px`` the solve starts there and keeps it as a prior (its sd and :data:`LENS_SD_FLOOR`
+    combined). Returns a dict with
     ``joints`` (n, 16, 3) world metres, ``camera`` (:class:`Camera`), ``sides`` (n, 16) int8, ``report``.
 
     BLAS runs on one thread meanwhile: the solver's matrices are small (33 x 33 frame blocks, a band of 99),
@@ -460,10 +469,11 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(limits=1, user_api="blas"):
-        return _solve_take(points, tracked, lengths, width, height, fps, p, progress, confidence, silhouette)
+        return _solve_take(points, tracked, lengths, width, height, fps, p, progress, confidence, silhouette, lens)
 
 
-def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams, progress, confidence, sil) -> dict:
+def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams, progress, confidence, sil,
+                lens=None) -> dict:
     t0 = time.perf_counter()
     n = points.shape[0]
     centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
@@ -481,6 +491,13 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
         starts, focal_prior = [float(p.focal_px)], (float(p.focal_px), 1e-4)
         report["focal_source"] = "given"
         q, estimated = p, False
+    elif lens is not None:
+        # a focal length from the room (calibrate.vanishing_points): one start there, kept as a prior; the take
+        # alone leaves the focal length 7-60 % open (bench/focal_profile.py), the room's lines fix it to a few %
+        sd = float(np.hypot(lens[1], LENS_SD_FLOOR))
+        starts, focal_prior = [float(lens[0])], (float(lens[0]), sd)
+        report["focal_source"] = f"room lines {lens[0]:.0f} px ± {100 * lens[1]:.1f} %, refined by the take"
+        q, estimated = p, False  # solved as with a given focal length, which the prior lets move by a few %
     else:
         # weak prior: lenses of ordinary cameras have f ~ 0.8-1.9 x the image width (log-normal around 1.2 W)
         starts, focal_prior = [m * width for m in p.focal_grid], (p.focal_prior_width * width, p.focal_prior_log_sd)
@@ -592,7 +609,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
     )
     # a second start ending at a clearly different focal length at a similar cost: the take cannot tell them apart
     rivals = [fe for f0, fe, c in sweep if abs(np.log(fe / f)) > np.log(1.1) and c < (1 + RIVAL_COST) * min(c2 for _, _, c2 in sweep)]
-    if estimated:
+    if estimated and len(starts) > 1:
         # the focal lengths the starts and cross seeds found about as cheap as the cheapest: how far the take leaves
         # the focal length open (the Jacobian's focal_sd_pct is the curvature at one minimum and understates it)
         near = [f] + [fe for _, fe, c in sweep if c < (1 + RIVAL_COST) * min(c2 for _, _, c2 in sweep)]
@@ -626,7 +643,9 @@ def silhouette_field(silhouette: dict, n_frames: int) -> SilhouetteField:
     version=1,
     inputs={"tracks": TRACKS2D, "body": optional(BODY, "bone lengths; defaults if absent"),
             "silhouette": optional(SILHOUETTE, "the actor's silhouette per frame (segment.silhouette): joints kept inside "
-                                   "it, the lower foot on the floor, the torso facing away where no torso patch is seen")},
+                                   "it, the lower foot on the floor, the torso facing away where no torso patch is seen"),
+            "lens": optional(LENS, "a focal length found before (calibrate.vanishing_points): the start and a prior, "
+                             "unless focal_px is given")},
     outputs={
         "motion": MOTION,
         "camera": CAMERA,
@@ -635,7 +654,7 @@ def silhouette_field(silhouette: dict, n_frames: int) -> SilhouetteField:
     },
     params=SolveTakeParams,
 )
-def solve_take(ctx, tracks, body, silhouette=None):
+def solve_take(ctx, tracks, body, silhouette=None, lens=None):
     """Camera (focal, pose above the floor) and motion estimated together from the whole take's 2D tracks."""
     p: SolveTakeParams = ctx.params
     tr = read_tracks(tracks)
@@ -653,8 +672,14 @@ def solve_take(ctx, tracks, body, silhouette=None):
         ctx.warn("confidence_power is set but the tracks carry no confidence: every tracked point weighs the same "
                  "(detectors such as detect.mediapipe_pose give one; suit trackers do not)")
     sil = None if silhouette is None else silhouette_field(silhouette, tr.n_frames)
+    prior = None
+    if lens is not None and lens.focal_px is not None and p.focal_px is None:
+        if (lens.width, lens.height) != (tr.width, tr.height):
+            raise NodeError(f"the lens estimate is for {lens.width}x{lens.height} px images, the tracks are "
+                            f"{tr.width}x{tr.height}", hint="connect the lens found on the same video as the tracks")
+        prior = (float(lens.focal_px), float(lens.focal_sd_pct or 0.0) / 100.0)
     out = solve_take_arrays(tr.points, tr.tracked, lengths, tr.width, tr.height, float(tr.fps), p,
-                            progress=ctx.progress, confidence=confidence, silhouette=sil)
+                            progress=ctx.progress, confidence=confidence, silhouette=sil, lens=prior)
     rep = out["report"]
     ctx.log(f"focal {rep['focal_px']:.0f} px (± {rep['focal_sd_pct']:.1f} %), camera {rep['camera_height_m']:.2f} m high, "
             f"{rep['camera_distance_m']:.2f} m away, tilt {rep['camera_tilt_deg']:.1f}°; {rep['solve_seconds']:.1f} s")

@@ -1,0 +1,199 @@
+"""``calibrate.vanishing_points``: the focal length from the room's straight lines (floor tiles, wall edges).
+
+Lines that are parallel in the world meet in the image at a vanishing point. The rays to the vanishing
+points ``v1``, ``v2`` (pixels) of two perpendicular directions are perpendicular, so with the principal
+point ``c`` at the image centre and square pixels ``(v1 - c)·(v2 - c) = -f²``. A person filmed by one
+camera leaves the focal length nearly undetermined (``bench/focal_profile.py``: a 20 % change costs the
+whole-take solve 1-7 %); a tiled floor or a room's edges fix it (renders: within 1 % when the camera looks
+at the room obliquely).
+
+1. **Background**: the per-pixel median of ``samples`` frames spread over the take (the actor moves, the
+   room stays).
+2. **Segments**: OpenCV's fast line detector (``cv2.ximgproc``) on it; those longer than ``min_length``
+   (fraction of the image width).
+3. **Vanishing points**: RANSAC. Two segments' lines meet at a candidate; every segment whose direction
+   points at it within ``angle_deg`` votes with its length. The best is refined (the homogeneous point
+   nearest all its segments' lines, weighted by length), its segments removed, and the search repeated,
+   ``max_points`` times at most.
+4. **Focal length**: of the pairs of finite vanishing points whose ``f`` lies in 0.3-8 x the image width
+   and whose families each carry ``min_share`` of all the segments' length, the one whose weaker family has
+   the most; its standard deviation from a bootstrap over the
+   two families' segments (``bootstrap`` resamples).
+
+No such pair (a plain background; a room seen square-on, whose sideways lines stay parallel in the image)
+gives ``focal_px`` None and a warning: the solver then estimates the focal length from the take alone. The
+assumption is a room whose main lines are perpendicular (floor tiles, walls): lines at other angles that
+happen to pass the tests give a wrong focal length, and the bootstrap cannot see that.
+"""
+from __future__ import annotations
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from ...core.node import node
+from ..bundles.lens import LensEstimate
+from ..io.video import iter_frames
+from ..ports import LENS, REPORT, VIDEO
+
+
+class VanishingParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    samples: int = Field(25, ge=3, le=200, description="frames spread over the take whose median is the room")
+    min_length: float = Field(0.04, gt=0, le=0.5, description="shortest segment used, as a fraction of the image width")
+    angle_deg: float = Field(1.0, gt=0, le=10, description="a segment votes for a vanishing point it points at within this angle", json_schema_extra={"unit": "deg"})
+    max_points: int = Field(4, ge=2, le=8, description="vanishing points searched for")
+    min_segments: int = Field(5, ge=2, description="fewest segments a vanishing point needs")
+    min_share: float = Field(0.1, ge=0, le=0.5, description="each of the two families giving the focal length carries at least this "
+                             "fraction of all the segments' length (a few stray edges never decide it)")
+    hypotheses: int = Field(2000, ge=100, description="RANSAC candidates per vanishing point")
+    bootstrap: int = Field(100, ge=10, description="bootstrap resamples for the focal length's standard deviation")
+    max_sd_pct: float = Field(10.0, gt=0, description="a focal length more uncertain than this (1 sd, %) is not passed on", json_schema_extra={"unit": "%"})
+    seed: int = Field(0, ge=0, description="random seed of RANSAC and the bootstrap")
+
+
+def median_background(clip, samples: int) -> np.ndarray:
+    """Per-pixel median ``(H, W, 3)`` uint8 of ``samples`` frames spread evenly over ``clip`` (each one seeked)."""
+    picks = np.unique(np.linspace(clip.start, clip.stop - 1, min(samples, clip.n_frames)).round().astype(int))
+    frames = [frame for i in picks for _, frame in iter_frames(clip, int(i), int(i) + 1)]
+    return np.median(np.stack(frames), axis=0).astype(np.uint8)
+
+
+def line_segments(image: np.ndarray, min_length_px: float) -> np.ndarray:
+    """Straight segments ``(k, 4)`` ``(x1, y1, x2, y2)`` px of a BGR image, longer than ``min_length_px``."""
+    import cv2
+
+    grey = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    found = cv2.ximgproc.createFastLineDetector().detect(grey)
+    seg = np.zeros((0, 4)) if found is None else found.reshape(-1, 4).astype(np.float64)
+    return seg[np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]) > min_length_px]
+
+
+def segment_lines(seg: np.ndarray) -> np.ndarray:
+    """Homogeneous lines ``(k, 3)`` through the segments, scaled so ``(a, b)`` is a unit normal."""
+    a = np.c_[seg[:, :2], np.ones(len(seg))]
+    b = np.c_[seg[:, 2:], np.ones(len(seg))]
+    ln = np.cross(a, b)
+    return ln / np.linalg.norm(ln[:, :2], axis=1, keepdims=True)
+
+
+def pointing_sine(seg: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``(m, k)``: sine of the angle between each of ``k`` segments and the direction from its midpoint to each
+    of ``m`` homogeneous points ``v`` ``(m, 3)`` (a point at infinity: its direction)."""
+    mid = 0.5 * (seg[:, :2] + seg[:, 2:])
+    d = seg[:, 2:] - seg[:, :2]
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    t = v[:, None, :2] - mid[None] * v[:, None, 2:3]  # (m, k, 2), up to sign and scale
+    cross = np.abs(t[..., 0] * d[None, :, 1] - t[..., 1] * d[None, :, 0])
+    return cross / np.maximum(np.linalg.norm(t, axis=-1), 1e-12)
+
+
+def refine_point(lines: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """The unit homogeneous point ``(3,)`` nearest the ``lines`` ``(k, 3)`` in weighted least squares."""
+    return np.linalg.svd(lines * weight[:, None], full_matrices=False)[2][-1]
+
+
+def find_vanishing_points(seg: np.ndarray, p: VanishingParams, rng: np.random.Generator) -> list[np.ndarray]:
+    """Index arrays of the segments voting for each vanishing point found (strongest first)."""
+    lines = segment_lines(seg)
+    length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
+    thr = np.sin(np.radians(p.angle_deg))
+    left = np.arange(len(seg))
+    families: list[np.ndarray] = []
+    while len(families) < p.max_points and len(left) >= p.min_segments:
+        pairs = rng.integers(0, len(left), size=(p.hypotheses, 2))
+        pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+        cand = np.cross(lines[left[pairs[:, 0]]], lines[left[pairs[:, 1]]])
+        norm = np.linalg.norm(cand, axis=1)
+        cand = cand[norm > 1e-12] / norm[norm > 1e-12, None]
+        if not len(cand):
+            break
+        votes = (pointing_sine(seg[left], cand) < thr) @ length[left]
+        best = cand[int(np.argmax(votes))]
+        inl = pointing_sine(seg[left], best[None])[0] < thr
+        if inl.sum() < 2:
+            break
+        best = refine_point(lines[left[inl]], length[left[inl]])
+        inl = pointing_sine(seg[left], best[None])[0] < thr
+        if inl.sum() < p.min_segments:
+            break
+        families.append(left[inl])
+        left = left[~inl]
+    return families
+
+
+def focal_from_pair(va: np.ndarray, vb: np.ndarray, centre: np.ndarray) -> float | None:
+    """Focal length (px) from two homogeneous vanishing points of perpendicular directions; None if not finite
+    or the geometry gives none."""
+    if abs(va[2]) < 1e-12 or abs(vb[2]) < 1e-12:
+        return None
+    f2 = -float(np.dot(va[:2] / va[2] - centre, vb[:2] / vb[2] - centre))
+    return float(np.sqrt(f2)) if f2 > 0 else None
+
+
+def estimate_focal(image: np.ndarray, p: VanishingParams) -> dict:
+    """``{"focal_px", "focal_sd_pct", "segments", "families": [[x, y] or None, count, length px], "pair",
+    "reason"}`` for one background image; ``focal_px`` None with ``reason`` when no perpendicular pair is found."""
+    h, w = image.shape[:2]
+    centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
+    rng = np.random.default_rng(p.seed)
+    seg = line_segments(image, p.min_length * w)
+    out: dict = {"segments": int(len(seg)), "families": [], "focal_px": None, "focal_sd_pct": None}
+    if len(seg) < 2 * p.min_segments:
+        out["reason"] = f"{len(seg)} straight edges in the background (a plain one?): too few for vanishing points"
+        return out
+    lines = segment_lines(seg)
+    length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
+    fams = find_vanishing_points(seg, p, rng)
+    points = [refine_point(lines[i], length[i]) for i in fams]
+    for v, i in zip(points, fams):
+        at = [round(float(v[0] / v[2]), 1), round(float(v[1] / v[2]), 1)] if abs(v[2]) > 1e-12 else None
+        out["families"].append([at, int(len(i)), round(float(length[i].sum()), 1)])
+    best = None
+    for a in range(len(fams)):
+        for b in range(a + 1, len(fams)):
+            f = focal_from_pair(points[a], points[b], centre)
+            if f is None or not 0.3 * w <= f <= 8.0 * w:
+                continue
+            if min(length[fams[a]].sum(), length[fams[b]].sum()) < p.min_share * length.sum():
+                continue
+            support = min(length[fams[a]].sum(), length[fams[b]].sum())
+            if best is None or support > best[0]:
+                best = (support, a, b, f)
+    if best is None:
+        out["reason"] = (f"{len(fams)} vanishing points, no two of them perpendicular with a plausible focal length "
+                         "(a room seen square-on keeps its sideways lines parallel)")
+        return out
+    _, a, b, f = best
+    boot = []
+    for _ in range(p.bootstrap):
+        ia = rng.choice(fams[a], len(fams[a]))
+        ib = rng.choice(fams[b], len(fams[b]))
+        fb = focal_from_pair(refine_point(lines[ia], length[ia]), refine_point(lines[ib], length[ib]), centre)
+        boot.append(np.log(fb) if fb is not None else np.nan)
+    boot = np.asarray(boot)
+    sd = float(np.nanstd(boot)) * 100.0 if np.isfinite(boot).mean() > 0.9 else float("inf")
+    out.update(focal_px=round(f, 2), focal_sd_pct=round(sd, 3) if np.isfinite(sd) else None, pair=[a, b])
+    if not np.isfinite(sd):
+        out["reason"] = "the bootstrap often finds no focal length: the two directions are nearly degenerate"
+    return out
+
+
+@node("calibrate.vanishing_points", version=1, inputs={"video": VIDEO}, outputs={"lens": LENS, "report": REPORT},
+      params=VanishingParams)
+def vanishing_points(ctx, video) -> dict:
+    """The focal length from the room's straight lines (module docstring): ``lens`` for ``reconstruct.solve_take``
+    (none, with a warning, when the background shows no two perpendicular families of lines)."""
+    p: VanishingParams = ctx.params
+    found = estimate_focal(median_background(video, p.samples), p)
+    f, sd = found["focal_px"], found["focal_sd_pct"]
+    if f is not None and sd is not None and sd <= p.max_sd_pct:
+        lens = LensEstimate(focal_px=f, focal_sd_pct=max(sd, 1e-3), width=video.width, height=video.height,
+                            source=f"vanishing points of the room's lines: {f:.0f} px ± {sd:.1f} %")
+        ctx.log(lens.source)
+    else:
+        why = found.get("reason") or f"too uncertain: {f:.0f} px ± {sd:.0f} % (1 sd)"
+        lens = LensEstimate(width=video.width, height=video.height, source=f"no focal length from the room: {why}")
+        ctx.warn(f"no focal length from the room's lines ({why}); it is estimated from the take alone, which "
+                 "leaves it 7-60 % open — give focal_px if you know it")
+    return {"lens": lens, "report": {**found, "source": lens.source}}
