@@ -16,7 +16,6 @@ checks it against finite differences. Camera frame, metres; residuals in units o
 from __future__ import annotations
 
 import numpy as np
-from numpy.lib.stride_tricks import as_strided
 
 from ..skeleton import N_JOINTS, PARENTS
 from .take_model import (ANKLES, AXIS_TRIPLES, HINGES, J, N_BONES, N_COVER, N_FRAME_RES, N_SIL, PELVIS_JOINTS, PELVIS_SIDE,
@@ -201,8 +200,11 @@ _REP_A = _rep_columns(_LIVE_A, AXIS_TRIPLES[_LIVE_A, 0])
 _REP_B = _rep_columns(_LIVE_B, AXIS_TRIPLES[_LIVE_B, 2])
 _PEL = np.flatnonzero(PELVIS_SIDE)
 _THO = np.flatnonzero(~PELVIS_SIDE)
-_REP_PEL = [_rep_columns(_PEL, np.full(len(_PEL), PELVIS_JOINTS[k])) for k in range(4)]
-_REP_THO = [_rep_columns(_THO, np.full(len(_THO), THORAX_JOINTS[k])) for k in range(4)]
+#: one scatter for the axis' terms: (p, p) for every point, then (p, a_p), (p, b_p) where live
+_REP_AXIS = np.concatenate([_rep_columns(np.arange(N_JOINTS), np.arange(N_JOINTS)), _REP_A, _REP_B])
+#: one for the fronts' terms: (pelvis-side points x the pelvis's 4 joints), then (the others x the thorax's 4)
+_REP_FRONT = np.concatenate([_rep_columns(np.repeat(_PEL, 4), np.tile(PELVIS_JOINTS, len(_PEL))),
+                             _rep_columns(np.repeat(_THO, 4), np.tile(THORAX_JOINTS, len(_THO)))]).reshape(N_JOINTS, 4, 2, 3)
 
 
 def _pinhole(X: np.ndarray, f: float) -> np.ndarray:
@@ -299,18 +301,14 @@ def _reprojection(prob: TakeProblem, P, g, thorax, d_thorax, pelvis, d_pelvis, o
     drho = robust_slope(e, w.robust_scale)
     Gq = (drho * s[..., None])[..., None] * _pinhole(Q, f)  # (n, 16, 2, 3)
     flat = out.reshape(n, -1)  # point p's rows (2 p + uv) by joint j's coordinate c: column (2 p + uv) 48 + 3 j + c
-    # the point's own joint (m == j): the diagonal (p, p) pairs, a strided view of out
-    s0, s1, s2, s3 = out.strides
-    own = as_strided(out, shape=(n, N_JOINTS, 2, 3), strides=(s0, 2 * s1 + s2, s1, s3))
-    own += Gq @ (np.broadcast_to(_EYE, (n, N_JOINTS, 3, 3)) + d_axis @ (-U2 + U1))
-    flat[:, _REP_A] += (Gq @ (d_axis @ -U1))[:, _LIVE_A]
-    flat[:, _REP_B] += (Gq @ (d_axis @ U2))[:, _LIVE_B]
+    # the point's own joint (m == j), the limb axis' other ends: distinct (point, joint) pairs, one scatter
+    flat[:, _REP_AXIS] += np.concatenate([Gq @ (np.broadcast_to(_EYE, (n, N_JOINTS, 3, 3)) + d_axis @ (-U2 + U1)),
+                                          (Gq @ (d_axis @ -U1))[:, _LIVE_A], (Gq @ (d_axis @ U2))[:, _LIVE_B]], axis=1)
     # the front's four joints: point j's rows += Gq_j o_out_j O_j proj_j D_k (D_k of its front), the first three
-    # factors once for all four joints; each point's rows go to its own front's joints
+    # factors once for all four joints; each point's rows go to its own front's joints (added after the axis' terms)
     GqOP = Gq @ (o_out * (O @ proj))  # (n, 16, 2, 3)
-    for k in range(4):
-        flat[:, _REP_PEL[k]] += GqOP[:, _PEL] @ d_pelvis[k][:, None]
-        flat[:, _REP_THO[k]] += GqOP[:, _THO] @ d_thorax[k][:, None]
+    flat[:, _REP_FRONT] += np.concatenate([GqOP[:, _PEL, None] @ np.stack(d_pelvis, axis=1)[:, None],
+                                           GqOP[:, _THO, None] @ np.stack(d_thorax, axis=1)[:, None]], axis=1)
     return {"Gq": Gq, "axis": axis, "out": outv, "dlogf": drho * s[..., None] * (f * Q[..., :2] / z[..., None])}
 
 
