@@ -38,6 +38,8 @@ def _subtree() -> np.ndarray:
 
 
 SUBTREE = _subtree()
+#: The (joint, bone) pairs of :data:`SUBTREE` (joint k at or below the end of bone b), as two index arrays
+_SUB_K, _SUB_B = np.nonzero(SUBTREE)
 
 
 def skew(v: np.ndarray) -> np.ndarray:
@@ -51,7 +53,10 @@ def unit_jacobian(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``unit(v)`` ``(..., 3)`` and its derivative ``(I - u uᵀ) / |v|`` ``(..., 3, 3)`` (as :func:`.take_model.unit`)."""
     norm = np.maximum(np.sqrt(np.einsum("...i,...i->...", v, v)), 1e-9)
     u = v / norm[..., None]
-    return u, (_EYE - u[..., :, None] * u[..., None, :]) / norm[..., None, None]
+    D = u[..., :, None] * u[..., None, :]
+    np.subtract(_EYE, D, out=D)
+    D /= norm[..., None, None]
+    return u, D
 
 
 def front_jacobian(P: np.ndarray, joints: tuple[int, int, int, int]) -> tuple[np.ndarray, list[np.ndarray]]:
@@ -75,8 +80,8 @@ def joint_jacobian(prob: TakeProblem, fr: np.ndarray, L: np.ndarray) -> np.ndarr
     turn = turn * L[1:, None, None]
     out = np.zeros((n, N_JOINTS, 3, PER_FRAME))
     out[..., :3] = _EYE
-    turn = np.moveaxis(turn, 1, 2)[:, None]  # (n, 1, 3, 15, 2)
-    out[..., 3:] = (SUBTREE[None, :, None, :, None] * turn).reshape(n, N_JOINTS, 3, 2 * N_BONES)
+    # joint k moves with bone b's turn where it hangs below it (SUBTREE), written pair by pair (a view of out)
+    out[..., 3:].reshape(n, N_JOINTS, 3, N_BONES, 2)[:, _SUB_K, :, _SUB_B] = np.moveaxis(turn[:, _SUB_B], 0, 1)
     return out
 
 
@@ -180,6 +185,28 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
     return out
 
 
+def _rep_columns(points: np.ndarray, joints: np.ndarray) -> np.ndarray:
+    """Flat indices ``(k, 2, 3)`` into a frame's reprojection rows by joint coordinates (``(2 p + uv) 48 + 3 j + c``)
+    of the (point, joint) pairs ``points``, ``joints`` ``(k,)``."""
+    uv, c = np.arange(2)[:, None], np.arange(3)[None, :]
+    return (2 * points[:, None, None] + uv) * (N_JOINTS * 3) + 3 * joints[:, None, None] + c
+
+
+#: The reprojection Jacobian's (point, joint) pairs beyond each point's own joint (:func:`_reprojection`): the
+#: limb axis' other ends (where they are other joints) and the four joints of each point's front
+_LIVE_A = np.flatnonzero(AXIS_TRIPLES[:, 0] != AXIS_TRIPLES[:, 1])
+_LIVE_B = np.flatnonzero(AXIS_TRIPLES[:, 2] != AXIS_TRIPLES[:, 1])
+_REP_A = _rep_columns(_LIVE_A, AXIS_TRIPLES[_LIVE_A, 0])
+_REP_B = _rep_columns(_LIVE_B, AXIS_TRIPLES[_LIVE_B, 2])
+_PEL = np.flatnonzero(PELVIS_SIDE)
+_THO = np.flatnonzero(~PELVIS_SIDE)
+#: one scatter for the axis' terms: (p, p) for every point, then (p, a_p), (p, b_p) where live
+_REP_AXIS = np.concatenate([_rep_columns(np.arange(N_JOINTS), np.arange(N_JOINTS)), _REP_A, _REP_B])
+#: one for the fronts' terms: (pelvis-side points x the pelvis's 4 joints), then (the others x the thorax's 4)
+_REP_FRONT = np.concatenate([_rep_columns(np.repeat(_PEL, 4), np.tile(PELVIS_JOINTS, len(_PEL))),
+                             _rep_columns(np.repeat(_THO, 4), np.tile(THORAX_JOINTS, len(_THO)))]).reshape(N_JOINTS, 4, 2, 3)
+
+
 def _pinhole(X: np.ndarray, f: float) -> np.ndarray:
     """``d uv / d X`` ``(..., 2, 3)`` of the projection ``uv = f X_xy / max(z, 1e-3) + c`` at points ``X`` ``(..., 3)``."""
     zc = X[..., 2]
@@ -264,7 +291,8 @@ def _reprojection(prob: TakeProblem, P, g, thorax, d_thorax, pelvis, d_pelvis, o
     outv, O = unit_jacobian(front - fa[..., None] * axis)
     proj = _EYE - axis[..., :, None] * axis[..., None, :]  # d out-vector / d front (before O)
     M = axis[..., :, None] * front[..., None, :] + fa[..., None, None] * _EYE  # minus d out-vector / d axis
-    d_axis = o_al * A + o_out * (O @ -M @ A)  # dQ per unit change of the axis' sum s, (n, 16, 3, 3)
+    np.negative(M, out=M)  # d out-vector / d axis
+    d_axis = o_al * A + o_out * (O @ M @ A)  # dQ per unit change of the axis' sum s, (n, 16, 3, 3)
     Q = P + offs[:, 0][None, :, None] * axis + offs[:, 1][None, :, None] * outv
     # d rep / dQ: soft-L1 of (f Q_xy / z + c - obs) * weight / sigma
     z = np.maximum(Q[..., 2], 1e-3)
@@ -272,26 +300,15 @@ def _reprojection(prob: TakeProblem, P, g, thorax, d_thorax, pelvis, d_pelvis, o
     e = ((f * Q[..., :2] / z[..., None] + d.centre) - d.points[rows]) * s[..., None]
     drho = robust_slope(e, w.robust_scale)
     Gq = (drho * s[..., None])[..., None] * _pinhole(Q, f)  # (n, 16, 2, 3)
-    rows = np.arange(N_JOINTS)
-    view = out[:, : 2 * N_JOINTS].reshape(n, N_JOINTS, 2, N_JOINTS, 3)
-
-    def add(joints: np.ndarray, dQ: np.ndarray, mask: np.ndarray | None = None) -> None:
-        """Point j's rows += Gq_j dQ_j for joint ``joints[j]`` (each (point, joint) pair once per call)."""
-        contrib = Gq @ dQ
-        pts = rows if mask is None else rows[mask]
-        view[:, pts, :, joints[pts], :] += contrib[:, pts].transpose(1, 0, 2, 3)  # advanced axes come first
-
-    add(m_i, np.broadcast_to(_EYE, (n, N_JOINTS, 3, 3)) + d_axis @ (-U2 + U1))  # the point's own joint (m == j)
-    add(a_i, d_axis @ -U1, a_i != m_i)
-    add(b_i, d_axis @ U2, b_i != m_i)
+    flat = out.reshape(n, -1)  # point p's rows (2 p + uv) by joint j's coordinate c: column (2 p + uv) 48 + 3 j + c
+    # the point's own joint (m == j), the limb axis' other ends: distinct (point, joint) pairs, one scatter
+    flat[:, _REP_AXIS] += np.concatenate([Gq @ (np.broadcast_to(_EYE, (n, N_JOINTS, 3, 3)) + d_axis @ (-U2 + U1)),
+                                          (Gq @ (d_axis @ -U1))[:, _LIVE_A], (Gq @ (d_axis @ U2))[:, _LIVE_B]], axis=1)
     # the front's four joints: point j's rows += Gq_j o_out_j O_j proj_j D_k (D_k of its front), the first three
-    # factors once for all four joints; each point's rows go to its own front's joints
+    # factors once for all four joints; each point's rows go to its own front's joints (added after the axis' terms)
     GqOP = Gq @ (o_out * (O @ proj))  # (n, 16, 2, 3)
-    pel = np.flatnonzero(PELVIS_SIDE)
-    tho = np.flatnonzero(~PELVIS_SIDE)
-    for k in range(4):
-        view[:, pel, :, PELVIS_JOINTS[k], :] += (GqOP[:, pel] @ d_pelvis[k][:, None]).transpose(1, 0, 2, 3)
-        view[:, tho, :, THORAX_JOINTS[k], :] += (GqOP[:, tho] @ d_thorax[k][:, None]).transpose(1, 0, 2, 3)
+    flat[:, _REP_FRONT] += np.concatenate([GqOP[:, _PEL, None] @ np.stack(d_pelvis, axis=1)[:, None],
+                                           GqOP[:, _THO, None] @ np.stack(d_thorax, axis=1)[:, None]], axis=1)
     return {"Gq": Gq, "axis": axis, "out": outv, "dlogf": drho * s[..., None] * (f * Q[..., :2] / z[..., None])}
 
 

@@ -22,19 +22,23 @@ JACOBIAN_CHUNK = 256
 def lower_band(diag: np.ndarray, up1: np.ndarray, up2: np.ndarray) -> np.ndarray:
     """LAPACK's lower band storage ``(3 m, n m)`` (``ab[i - j, j] = A[i, j]``, ``3 m - 1`` subdiagonals) of the
     symmetric block-banded matrix with diagonal blocks ``diag`` and upper blocks ``up1`` (t, t+1), ``up2``
-    (t, t+2), each ``(n, m, m)``. Each block column ``[diag; up1ᵀ; up2ᵀ]`` is read along its diagonals by a
-    strided view (no index arrays), copied once into Fortran order."""
+    (t, t+2), each ``(n, m, m)``. Block column t of the lower triangle, transposed, is the block row
+    ``W_t = [diag_tᵀ | up1_t | up2_t | 0]`` ``(m, 4 m)``; the band's column ``t m + c`` is ``W_t[c, c:c + 3 m]``,
+    read by a strided view (no index arrays) and copied once into Fortran order."""
     from numpy.lib.stride_tricks import as_strided
 
     n, m, _ = diag.shape
-    K = np.zeros((n, 4 * m, m))  # block column t: rows of blocks (t, t), (t+1, t), (t+2, t), then zeros
-    K[:, :m] = diag
-    K[:-1, m:2 * m] = np.swapaxes(up1[:-1], 1, 2)
-    K[:-2, 2 * m:3 * m] = np.swapaxes(up2[:-2], 1, 2)
-    st = K.strides
-    skew = as_strided(K, shape=(n, 3 * m, m), strides=(st[0], st[1], st[1] + st[2]), writeable=False)  # [t, d, c] = K[t, c + d, c]
+    W = np.empty((n, m, 4 * m))
+    W[:, :, :m] = np.swapaxes(diag, 1, 2)
+    W[:-1, :, m:2 * m] = up1[:-1]
+    W[-1:, :, m:2 * m] = 0.0
+    W[:-2, :, 2 * m:3 * m] = up2[:-2]
+    W[-2:, :, 2 * m:3 * m] = 0.0
+    W[:, :, 3 * m:] = 0.0
+    st = W.strides
+    skew = as_strided(W, shape=(n, m, 3 * m), strides=(st[0], st[1] + st[2], st[2]), writeable=False)  # [t, c, d] = W[t, c, c + d]
     cols = np.empty((n, m, 3 * m))  # [t, c, d]: the band's column t m + c, so C order here is Fortran order there
-    cols[...] = skew.transpose(0, 2, 1)
+    cols[...] = skew
     return cols.reshape(n * m, 3 * m).T
 
 
@@ -157,8 +161,10 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray, r: np.ndarray | None = 
         s2 = prob.acc_scale[None, :, None] ** 2
         mask = prob.d.acc_mask()
         c = (1.0, -2.0, 1.0)
+        dPs = dP * prob.acc_scale[None, :, None]  # S dP, once for the three block diagonals
         for k in range(3):
-            bf[k:n - 2 + k] += c[k] * _gram_vec(dP[k:n - 2 + k] * prob.acc_scale[None, :, None], acc)
+            bf[k:n - 2 + k] += c[k] * _gram_vec(dPs[k:n - 2 + k], acc)
+        del dPs
         w0 = np.zeros(n)  # sum over the windows holding frame t of m_i c_k²
         for k in range(3):
             w0[k:n - 2 + k] += c[k] ** 2 * mask
@@ -166,9 +172,16 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray, r: np.ndarray | None = 
         w1[:n - 2] += c[0] * c[1] * mask
         w1[1:] += c[1] * c[2] * mask
         dPs2 = dP * s2
-        diag += w0[:, None, None] * _gram(dP, dPs2)
-        up1[:-1] += w1[:, None, None] * _gram(dPs2[:-1], dP[1:])
-        up2[:-2] += (c[0] * c[2] * mask)[:, None, None] * _gram(dPs2[:-2], dP[2:])
+        blk = _gram(dP, dPs2)  # each product scaled and added in place (no further temporaries)
+        blk *= w0[:, None, None]
+        diag += blk
+        blk = _gram(dPs2[:-1], dP[1:])
+        blk *= w1[:, None, None]
+        up1[:-1] += blk
+        blk = _gram(dPs2[:-2], dP[2:])
+        blk *= (c[0] * c[2] * mask)[:, None, None]
+        up2[:-2] += blk
+        del blk, dPs2
     step, both = prob.slide_vectors(P0, nf)
     norm = np.linalg.norm(step, axis=-1, keepdims=True)
     u = np.where(both[..., None], step / np.maximum(norm, 1e-9), 0.0)
