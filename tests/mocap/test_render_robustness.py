@@ -13,7 +13,7 @@ import pytest
 
 from tbha_graph.core.testing import run_node
 from tbha_graph.mocap.camera import Camera
-from tbha_graph.mocap.color.balance import choose_balance
+from tbha_graph.mocap.segment.balance import choose_balance
 from tbha_graph.mocap.color.rg_chromaticity import rg_chromaticity
 from tbha_graph.mocap.io.video import iter_frames, video
 from tbha_graph.mocap.segment.hierarchical import HierarchicalParams, segment_clip

@@ -19,7 +19,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.node import node
 from ..bundles.colors import ColorModel, as_color_model
-from ..color.balance import apply_gains
+from .balance import apply_gains
 from ..io.video import iter_frames
 from ..ports import COLORS, DETECTIONS, VIDEO, VideoClip
 from ..bundles.detections import DetectionBuffer
@@ -41,7 +41,7 @@ class ChromaThresholdParams(BaseModel):
     extra_candidates: int = Field(1, ge=0, le=8, description="candidate slots per colour beyond the joints wearing it")
     white_balance: Literal["auto", "off"] = Field(
         "auto", description="'auto': undo a coloured light or camera white balance when the suit's patches read "
-        "better with the suit's white made white (tbha_graph.mocap.color.balance; judged on the first second); 'off': never",
+        "better with the suit's white made white (tbha_graph.mocap.segment.balance; judged on the first second); 'off': never",
     )
 
 

@@ -22,7 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from ...core.node import node
 from ..bundles.colors import ColorModel, as_color_model
-from ..color.balance import Balance, apply_gains, choose_balance
+from .balance import Balance, apply_gains, choose_balance
 from ..io.video import iter_frames
 from ..ports import COLORS, DETECTIONS, VIDEO, VideoClip
 from ..bundles.detections import DetectionBuffer
@@ -71,7 +71,7 @@ class HierarchicalParams(BaseModel):
     )
     white_balance: Literal["auto", "off"] = Field(
         "auto", description="'auto': undo a coloured light or camera white balance when the suit's patches read "
-        "better with the suit's white made white (tbha_graph.mocap.color.balance; judged on the first second); 'off': never",
+        "better with the suit's white made white (tbha_graph.mocap.segment.balance; judged on the first second); 'off': never",
     )
     full_search_every: int = Field(
         0, ge=0, description="search the whole frame every this many frames anyway (0 = only when lost)",
@@ -240,7 +240,7 @@ class HierarchicalSegmenter:
 
 
 def clip_balance(clip: VideoClip, model: ColorModel, mode: str, min_area: float = 10.0, samples: int = 4) -> Balance:
-    """The white balance of ``clip`` for ``model`` (:func:`~tbha_graph.mocap.color.balance.choose_balance`),
+    """The white balance of ``clip`` for ``model`` (:func:`~tbha_graph.mocap.segment.balance.choose_balance`),
     judged on ``samples`` frames spread over the clip's first second; none when ``mode`` is ``'off'``."""
     if mode == "off":
         return Balance(None)

@@ -143,8 +143,8 @@ def choose_balance(frames: list[np.ndarray], model: ColorModel, min_area: float 
     sample frames, e.g. the take's first second): most complete colours (:func:`read_quality`), then the
     best fit. No correction unless a candidate completes more colours, or as many with a fit better by
     ``FIT_GAIN`` (a video the model already reads well is left exactly as it is)."""
-    from ..segment.labels import PixelClassifier
-    from .spaces import index_planes
+    from .labels import PixelClassifier
+    from ..color.spaces import index_planes
 
     if not frames:
         return Balance(None)
