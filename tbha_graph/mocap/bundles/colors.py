@@ -43,6 +43,8 @@ class ColorModel(BaseModel):
     suit_ref: tuple[float, float] = Field(description="chroma of the white suit, space units")
     suit_tol: float = Field(ge=0, description="tolerance radius of the suit's white, space units")
     patch_radius: float = Field(gt=0, description="patch radius on the suit, metres (from the suit spec)")
+    suit_rgb: tuple[float, float, float] = Field(
+        (0.949, 0.949, 0.949), description="the suit's own colour, sRGB in [0, 1] (the white a white balance maps to)")
 
     @property
     def names(self) -> list[str]:

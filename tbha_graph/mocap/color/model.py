@@ -96,6 +96,7 @@ def build_color_model(space: str, suit: SuitSpec, tolerance_scale: float = 0.9, 
     return ColorModel(
         space=space, classes=classes, min_luma=float(min_luma), dark_max_luma=float(dark_max_luma),
         suit_ref=(float(suit_ref[0]), float(suit_ref[1])), suit_tol=float(tols[-1]), patch_radius=float(suit.patch_radius),
+        suit_rgb=tuple(float(x) for x in suit_rgb),
     )
 
 

@@ -11,12 +11,15 @@ as streamed (after io.video's downscale).
 """
 from __future__ import annotations
 
+from typing import Literal
+
 import cv2
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.node import node
 from ..bundles.colors import ColorModel, as_color_model
+from .balance import apply_gains
 from ..io.video import iter_frames
 from ..ports import COLORS, DETECTIONS, VIDEO, VideoClip
 from ..bundles.detections import DetectionBuffer
@@ -36,6 +39,10 @@ class ChromaThresholdParams(BaseModel):
         True, description="take each region's convex hull (fills notches highlights cut into a patch's edge)"
     )
     extra_candidates: int = Field(1, ge=0, le=8, description="candidate slots per colour beyond the joints wearing it")
+    white_balance: Literal["auto", "off"] = Field(
+        "auto", description="'auto': undo a coloured light or camera white balance when the suit's patches read "
+        "better with the suit's white made white (tbha_graph.mocap.segment.balance; judged on the first second); 'off': never",
+    )
 
 
 def threshold_frame(frame: np.ndarray, classifier: PixelClassifier, params: ChromaThresholdParams):
@@ -54,9 +61,17 @@ def threshold_frame(frame: np.ndarray, classifier: PixelClassifier, params: Chro
     return out
 
 
-def segment_clip(clip: VideoClip, model: ColorModel, params: ChromaThresholdParams, progress=None) -> dict[str, np.ndarray]:
-    """Run the threshold segmenter over a clip; returns the detections bundle."""
+def segment_clip(clip: VideoClip, model: ColorModel, params: ChromaThresholdParams, progress=None,
+                 log=None) -> dict[str, np.ndarray]:
+    """Run the threshold segmenter over a clip; returns the detections bundle. ``log`` receives a line
+    saying which white balance was used."""
+    from .hierarchical import clip_balance
+
     classifier = PixelClassifier(model)
+    balance = clip_balance(clip, model, params.white_balance, params.min_area)
+    if log is not None:
+        log(balance.describe())
+    lut = balance.lut()
     max_k = max(len(c.joints) for c in model.classes) + params.extra_candidates
     buf = DetectionBuffer(clip.n_frames, classifier.n_classes, max_k)
     frames = iter_frames(clip)
@@ -64,13 +79,13 @@ def segment_clip(clip: VideoClip, model: ColorModel, params: ChromaThresholdPara
         frames = progress(frames, total=clip.n_frames, desc="segment")
     for row, (index, frame) in enumerate(frames):
         buf.frame_index[row] = index
-        for c, r in enumerate(threshold_frame(frame, classifier, params)):
+        for c, r in enumerate(threshold_frame(apply_gains(frame, lut), classifier, params)):
             buf.put(row, c, r.centres, r.areas, r.boxes)
     return buf.to_arrays(model.names, clip.fps, clip.width, clip.height)
 
 
 @node(
-    "segment.chroma_threshold", version=1,
+    "segment.chroma_threshold", version=2,
     inputs={"video": VIDEO, "colors": COLORS},
     outputs={"detections": DETECTIONS}, params=ChromaThresholdParams,
 )
@@ -78,4 +93,4 @@ def chroma_threshold(ctx, video, colors) -> dict:
     """Find the suit's patches and the dark head in every frame by plain per-colour thresholding of the
     whole frame and connected regions (centroids); no temporal prediction."""
     clip = video if isinstance(video, VideoClip) else VideoClip.model_validate(video)
-    return {"detections": segment_clip(clip, as_color_model(colors), ctx.params, progress=ctx.progress)}
+    return {"detections": segment_clip(clip, as_color_model(colors), ctx.params, progress=ctx.progress, log=ctx.log)}

@@ -22,6 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from ...core.node import node
 from ..bundles.colors import ColorModel, as_color_model
+from .balance import Balance, apply_gains, choose_balance
 from ..io.video import iter_frames
 from ..ports import COLORS, DETECTIONS, VIDEO, VideoClip
 from ..bundles.detections import DetectionBuffer
@@ -67,6 +68,10 @@ class HierarchicalParams(BaseModel):
     lost_search_every: int = Field(
         2, ge=1, description="while a patch is lost, search the whole frame every this many frames",
         json_schema_extra={"unit": "frame"},
+    )
+    white_balance: Literal["auto", "off"] = Field(
+        "auto", description="'auto': undo a coloured light or camera white balance when the suit's patches read "
+        "better with the suit's white made white (tbha_graph.mocap.segment.balance; judged on the first second); 'off': never",
     )
     full_search_every: int = Field(
         0, ge=0, description="search the whole frame every this many frames anyway (0 = only when lost)",
@@ -234,16 +239,33 @@ class HierarchicalSegmenter:
         return [(b.cls, b.pos, b.area, b.box) for b in self.blobs]
 
 
-def segment_clip(clip: VideoClip, model: ColorModel, params: HierarchicalParams, progress=None) -> dict[str, np.ndarray]:
-    """Run the hierarchical segmenter over a clip; returns the detections bundle."""
+def clip_balance(clip: VideoClip, model: ColorModel, mode: str, min_area: float = 10.0, samples: int = 4) -> Balance:
+    """The white balance of ``clip`` for ``model`` (:func:`~tbha_graph.mocap.segment.balance.choose_balance`),
+    judged on ``samples`` frames spread over the clip's first second; none when ``mode`` is ``'off'``."""
+    if mode == "off":
+        return Balance(None)
+    span = max(1, int(round(clip.fps)))
+    step = max(1, span // max(1, samples - 1))
+    frames = [f for i, (_, f) in enumerate(iter_frames(clip, clip.start, min(clip.stop, clip.start + span + 1))) if i % step == 0]
+    return choose_balance(frames[:samples], model, min_area)
+
+
+def segment_clip(clip: VideoClip, model: ColorModel, params: HierarchicalParams, progress=None,
+                 log=None) -> dict[str, np.ndarray]:
+    """Run the hierarchical segmenter over a clip; returns the detections bundle. ``log`` receives a line
+    saying which white balance was used."""
     seg = HierarchicalSegmenter(model, params, clip.width, clip.height)
     buf = DetectionBuffer(clip.n_frames, seg.n_classes, seg.max_k)
+    balance = clip_balance(clip, model, params.white_balance, params.min_area)
+    if log is not None:
+        log(balance.describe())
+    lut = balance.lut()
     frames = iter_frames(clip)
     if progress is not None:
         frames = progress(frames, total=clip.n_frames, desc="segment")
     for row, (index, frame) in enumerate(frames):
         buf.frame_index[row] = index
-        found = seg.process(frame)
+        found = seg.process(apply_gains(frame, lut))
         for c in range(seg.n_classes):
             mine = [f for f in found if f[0] == c]
             if mine:
@@ -252,7 +274,7 @@ def segment_clip(clip: VideoClip, model: ColorModel, params: HierarchicalParams,
 
 
 @node(
-    "segment.hierarchical", version=1,
+    "segment.hierarchical", version=2,
     inputs={"video": VIDEO, "colors": COLORS},
     outputs={"detections": DETECTIONS}, params=HierarchicalParams,
 )
@@ -261,4 +283,4 @@ def hierarchical(ctx, video, colors) -> dict:
     (adaptive colour clustering ∪ Roberts edges, boundary-histogram rectangle) in windows around
     each patch's predicted position; whole-frame search at reduced resolution only when needed."""
     clip = video if isinstance(video, VideoClip) else VideoClip.model_validate(video)
-    return {"detections": segment_clip(clip, as_color_model(colors), ctx.params, progress=ctx.progress)}
+    return {"detections": segment_clip(clip, as_color_model(colors), ctx.params, progress=ctx.progress, log=ctx.log)}

@@ -33,12 +33,17 @@ class StartParams(BaseModel):
         4.0, ge=0, description="same-coloured patches must be at least this far apart vertically in the start frame",
         json_schema_extra={"unit": "px"},
     )
+    max_missing: int = Field(
+        1, ge=0, le=4, description="when no frame of the opening shows every patch (one washed out by a strong light), "
+        "start from one missing at most this many: placed by the T-pose template, not tracked, until seen",
+    )
 
 
 class FrameTracker(Protocol):
     """One tracking direction: ``step`` takes a frame's candidates per class (list over classes of
     (k, 2) px arrays, or (k, 3) with the blob areas in px² when the tracker asked for them) and returns
-    ``points`` (16, 2) px and ``tracked`` (16,) bool."""
+    ``points`` (16, 2) px and ``tracked`` (16,) bool. A tracker may have ``start_unseen(joints)``: those
+    joints were not seen in the start frame (placed by the T-pose template)."""
 
     def step(self, candidates: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]: ...
 
@@ -64,9 +69,10 @@ def class_joints(model: ColorModel, names: np.ndarray) -> list[list[int]]:
     return out
 
 
-def start_frame(centres, areas, joints_of, params: StartParams, fps: float) -> tuple[int, np.ndarray]:
-    """Row of the start frame and the 16 joints' pixels there; NodeError naming what is wrong otherwise."""
-    found = find_start(centres, areas, joints_of, params.init_frames, params.min_separation)
+def start_frame(centres, areas, joints_of, params: StartParams, fps: float) -> tuple[int, np.ndarray, list[int]]:
+    """Row of the start frame, the 16 joints' pixels there and the joints not seen there (placed by the T-pose
+    template, :mod:`.posture`); NodeError naming what is wrong otherwise."""
+    found = find_start(centres, areas, joints_of, params.init_frames, params.min_separation, params.max_missing)
     if not isinstance(found, PostureResult):
         return found
     n = min(params.init_frames, len(centres))
@@ -78,13 +84,16 @@ def start_frame(centres, areas, joints_of, params: StartParams, fps: float) -> t
     raise NodeError(
         f"no start T-pose in the first {n} frames ({n / fps:.1f} s): in the closest frame, " + ". ".join(what),
         hint="the actor must stand facing the camera in a T-pose, every patch visible, at the start of the video; "
-        "otherwise check the colour model (lighting, min_luma, tolerance_scale) or raise init_frames",
+        "otherwise check the suit file matches the suit worn (--set colors.suit=my_suit.yaml; "
+        "python -m tbha_graph.mocap.color.sample_suit samples its real colours from the take), the light (a patch "
+        "washed out to white, or too dark: colors.min_luma), or raise init_frames",
     )
 
 
 def run_passes(candidates: Callable[[int], list[np.ndarray]], n: int, start: int, points0: np.ndarray,
-               make: Callable[[np.ndarray], FrameTracker]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Track from ``start`` (joints at ``points0`` (16, 2)) forwards to row n-1 and backwards to row 0.
+               make: Callable[[np.ndarray], FrameTracker], unseen: list[int] = ()) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Track from ``start`` (joints at ``points0`` (16, 2); ``unseen`` joints placed there, not seen) forwards
+    to row n-1 and backwards to row 0.
 
     ``candidates(row)`` gives a frame's candidates per class; ``make(points0)`` a fresh tracker.
     Returns points, tracked and ``doubt`` (n,) uint8: each frame's :data:`DOUBT` bits (a tracker that
@@ -94,8 +103,11 @@ def run_passes(candidates: Callable[[int], list[np.ndarray]], n: int, start: int
     doubt = np.zeros(n, np.uint8)
     points[start] = points0
     tracked[start] = True
+    tracked[start, list(unseen)] = False
     for rows in (range(start + 1, n), range(start - 1, -1, -1)):
         tr = make(points0)
+        if len(unseen) and hasattr(tr, "start_unseen"):
+            tr.start_unseen(list(unseen))
         for t in rows:
             points[t], tracked[t] = tr.step(candidates(t))
             doubt[t] = int(getattr(tr, "doubt", 0))

@@ -68,8 +68,9 @@ def nearest(ctx, detections, colors) -> dict:
     model = as_color_model(colors)
     centres, areas = check_detections(detections)
     joints_of = class_joints(model, detections["colour_names"])
-    start, points0 = start_frame(centres, areas, joints_of, p, float(detections["fps"]))
+    start, points0, unseen = start_frame(centres, areas, joints_of, p, float(detections["fps"]))
     points, tracked, _ = run_passes(
-        frame_candidates(centres), len(centres), start, points0, lambda p0: NearestTracker(p0, joints_of, p)
+        frame_candidates(centres), len(centres), start, points0, lambda p0: NearestTracker(p0, joints_of, p),
+        unseen,
     )
     return {"tracks": tracks_bundle(points, tracked, detections)}

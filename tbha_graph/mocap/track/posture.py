@@ -12,11 +12,18 @@ actor's left (+x) appears on the image's right. A frame is accepted as the start
 joint has a candidate, the head-neck-chest-hips chain is ordered top to bottom, every arm joint is
 above the hips patch, and same-coloured candidates are clearly apart vertically.
 
+When no frame shows every patch (a patch washed out by a strong light in the whole opening, e.g. the neck
+patch facing a bright key light), a frame missing at most ``max_missing`` patches is accepted: the rest T-pose
+is fitted to the joints found (scale and offset per image axis) and predicts where the missing ones are; a
+colour with fewer candidates than joints gives its candidates to the joints predicted nearest. The missing
+joints start at their predicted pixels, not tracked.
+
 Image coordinates: pixels, x right, y down (smaller y = higher).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from itertools import permutations
 
 import numpy as np
 
@@ -35,6 +42,7 @@ class PostureResult:
     points: np.ndarray
     missing: list[str]
     problems: list[str]
+    unseen: list[int] = field(default_factory=list)  # joints placed by the T-pose template (max_missing > 0)
 
     @property
     def ok(self) -> bool:
@@ -48,12 +56,32 @@ def _rank_joints(joints: list[int]) -> list[int]:
     return sorted(joints, key=lambda j: (-round(rest[j, 1], 6), rest[j, 0]))
 
 
-def identify(centres: np.ndarray, areas: np.ndarray, class_joints: list[list[int]], min_separation: float) -> PostureResult:
+def template_points(pts: np.ndarray) -> np.ndarray | None:
+    """The rest T-pose seen from the front ``(16, 2)`` px, fitted (scale and offset per image axis, least
+    squares) to the joints of ``pts`` (16, 2) that are not NaN; None when fewer than 4 are."""
+    rest = tpose()
+    tx, ty = rest[:, 0], -rest[:, 1]  # facing the camera: the actor's +x on the image's right, y down
+    have = np.isfinite(pts[:, 0])
+    if have.sum() < 4:
+        return None
+    out = np.empty((N_JOINTS, 2))
+    for axis, t in enumerate((tx, ty)):
+        A = np.column_stack([t[have], np.ones(int(have.sum()))])
+        coef = np.linalg.lstsq(A, pts[have, axis], rcond=None)[0]
+        out[:, axis] = coef[0] * t + coef[1]
+    return out
+
+
+def identify(centres: np.ndarray, areas: np.ndarray, class_joints: list[list[int]], min_separation: float,
+             max_missing: int = 0) -> PostureResult:
     """Identify the joints in one frame's candidates: ``centres`` (C, K, 2) px (NaN = empty slot),
-    ``areas`` (C, K); ``class_joints[c]`` = joint indices wearing class ``c``."""
+    ``areas`` (C, K); ``class_joints[c]`` = joint indices wearing class ``c``. With ``max_missing`` > 0, up to
+    that many joints without a candidate are placed by the T-pose template (module docstring) and listed in
+    ``unseen``."""
     pts = np.full((N_JOINTS, 2), np.nan)
     missing: list[str] = []
     problems: list[str] = []
+    short: list[tuple[list[int], np.ndarray]] = []  # colours with fewer candidates than joints, and their candidates
     for c, joints in enumerate(class_joints):
         if not joints:
             continue
@@ -61,6 +89,7 @@ def identify(centres: np.ndarray, areas: np.ndarray, class_joints: list[list[int
         if valid.size < len(joints):
             names = " / ".join(JOINT_NAMES[j] for j in joints)
             missing.append(names if valid.size == 0 else f"{names} (only {valid.size} of {len(joints)} same-coloured patches found)")
+            short.append((joints, centres[c, valid[np.argsort(-areas[c, valid], kind="stable")]]))
             continue
         # the largest candidates, one per joint, then ordered top to bottom (ties: left to right)
         take = valid[np.argsort(-areas[c, valid], kind="stable")[: len(joints)]]
@@ -85,8 +114,19 @@ def identify(centres: np.ndarray, areas: np.ndarray, class_joints: list[list[int
             if len(np.unique(rest_y)) == len(joints) and gaps.min() < min_separation:
                 names = ", ".join(JOINT_NAMES[j] for j in joints)
                 problems.append(f"same-coloured patches {names} are only {gaps.min():.1f} px apart vertically")
+    unseen: list[int] = []
     if missing:
-        return PostureResult(pts, missing, problems)
+        n_missing = sum(len(js) - len(cand) for js, cand in short)
+        template = template_points(pts) if n_missing <= max_missing else None
+        if template is None:
+            return PostureResult(pts, missing, problems)
+        for joints, cand in short:  # the candidates go to the joints the template puts nearest
+            best = min(permutations(joints, len(cand)),
+                       key=lambda js: sum(float(np.linalg.norm(cand[i] - template[j])) for i, j in enumerate(js)))
+            for i, j in enumerate(best):
+                pts[j] = cand[i]
+            unseen += [j for j in joints if j not in best]
+        pts[unseen] = template[unseen]
     y = {n: pts[JOINT_INDEX[n], 1] for n in JOINT_NAMES}
     for a, b in zip(_CHAIN[:-1], _CHAIN[1:]):
         if not y[a] < y[b]:
@@ -94,22 +134,33 @@ def identify(centres: np.ndarray, areas: np.ndarray, class_joints: list[list[int
     low = [n for n in _ARM if not y[n] < y["hips"]]
     if low:
         problems.append(f"{', '.join(low)} not above the hips (arms not raised as in the T-pose)")
-    return PostureResult(pts, [], problems)
+    return PostureResult(pts, [], problems, unseen)
 
 
 def find_start(centres: np.ndarray, areas: np.ndarray, class_joints: list[list[int]], frames: int,
-               min_separation: float) -> tuple[int, np.ndarray] | PostureResult:
+               min_separation: float, max_missing: int = 0) -> tuple[int, np.ndarray, list[int]] | PostureResult:
     """The first of the first ``frames`` frames whose candidates pass :func:`identify`:
-    ``(row, points (16, 2))``; otherwise the :class:`PostureResult` of the frame that came closest
-    (fewest missing joints, then fewest problems), for the error message."""
+    ``(row, points (16, 2), [])``; failing that, with ``max_missing`` > 0, the first passing with the fewest
+    joints placed by the T-pose template: ``(row, points, unseen joints)``; otherwise the
+    :class:`PostureResult` of the frame that came closest (fewest missing joints, then fewest problems), for
+    the error message."""
     best: PostureResult | None = None
     best_key = None
-    for t in range(min(frames, len(centres))):
+    n = min(frames, len(centres))
+    for t in range(n):
         r = identify(centres[t], areas[t], class_joints, min_separation)
         if r.ok:
-            return t, r.points
+            return t, r.points, []
         key = (len(r.missing), len(r.problems))
         if best is None or key < best_key:
             best, best_key = r, key
+    if max_missing > 0:
+        partial: tuple[int, np.ndarray, list[int]] | None = None
+        for t in range(n):
+            r = identify(centres[t], areas[t], class_joints, min_separation, max_missing)
+            if r.ok and (partial is None or len(r.unseen) < len(partial[2])):
+                partial = (t, r.points, r.unseen)
+        if partial is not None:
+            return partial
     assert best is not None
     return best

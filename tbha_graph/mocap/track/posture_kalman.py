@@ -142,6 +142,11 @@ class KalmanTracker:
         self.doubt = 0  # why the last frame's labelling is doubtful (bits of common.DOUBT)
         self.guessed: set[frozenset[int]] = set()  # left/right twins whose identities were re-acquired by a guess
 
+    def start_unseen(self, joints: list[int]) -> None:
+        """``joints`` were not seen in the start frame (their points0 are the T-pose template's guess): they start
+        lost, so they are re-acquired only where their bones put them and never take a followed patch's blob."""
+        self.unseen[list(joints)] = self.p.lost_after_frames + 1
+
     def _reset(self, kf, xy) -> None:
         kf.statePost = np.array([[xy[0]], [xy[1]], [0.0], [0.0]], np.float32)
         kf.errorCovPost = np.diag([self.p.measurement_noise**2] * 2 + [self.p.gate_px**2 / 4.0] * 2).astype(np.float32)
@@ -346,9 +351,10 @@ def posture_kalman(ctx, detections, colors) -> dict:
     model = as_color_model(colors)
     centres, areas = check_detections(detections)
     joints_of = class_joints(model, detections["colour_names"])
-    start, points0 = start_frame(centres, areas, joints_of, p, float(detections["fps"]))
+    start, points0, unseen = start_frame(centres, areas, joints_of, p, float(detections["fps"]))
     points, tracked, doubt = run_passes(
-        frame_candidates(centres, areas), len(centres), start, points0, lambda p0: KalmanTracker(p0, joints_of, p)
+        frame_candidates(centres, areas), len(centres), start, points0, lambda p0: KalmanTracker(p0, joints_of, p),
+        unseen,
     )
     if p.require_tpose:
         check_opening_tpose(ctx, points, tracked, float(detections["fps"]), p.tpose_seconds)
@@ -357,7 +363,7 @@ def posture_kalman(ctx, detections, colors) -> dict:
 
 def check_opening_tpose(ctx, points, tracked, fps: float, seconds: float) -> None:
     """NodeError with the way out unless the tracks open with a T-pose (:func:`find_tpose`)."""
-    found = find_tpose(points, tracked, fps, seconds=seconds)
+    found = find_tpose(points, tracked, fps, seconds=seconds, max_untracked=1)  # one washed-out patch (posture.py)
     if found is None:
         raise NodeError(
             f"no T-pose facing the camera in the first {seconds:g} s of the take (arms level and out, legs straight): "

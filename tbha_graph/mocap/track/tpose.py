@@ -22,10 +22,12 @@ NEEDED = ("neck", "hips", "left_shoulder", "right_shoulder", "left_elbow", "righ
 
 
 def tpose_frames(points: np.ndarray, tracked: np.ndarray, level: float = 0.3, reach: float = 0.6,
-                 max_knee_deg: float = 30.0) -> np.ndarray:
-    """(n_frames,) bool: frames whose 2D joints show a T-pose facing the camera (criteria above)."""
+                 max_knee_deg: float = 30.0, max_untracked: int = 0) -> np.ndarray:
+    """(n_frames,) bool: frames whose 2D joints show a T-pose facing the camera (criteria above); up to
+    ``max_untracked`` of the needed joints may be the tracker's estimates instead of seen patches."""
     p = np.asarray(points, dtype=np.float64)
-    ok = np.asarray(tracked, dtype=bool)[:, [J[j] for j in NEEDED]].all(axis=1) & np.isfinite(p).all(axis=(1, 2))
+    seen = np.asarray(tracked, dtype=bool)[:, [J[j] for j in NEEDED]].sum(axis=1)
+    ok = (seen >= len(NEEDED) - max_untracked) & np.isfinite(p).all(axis=(1, 2))
     x, y = p[..., 0], p[..., 1]
     L = np.linalg.norm(p[:, J["neck"]] - p[:, J["hips"]], axis=1)
     L = np.where(L > 1e-6, L, np.nan)
