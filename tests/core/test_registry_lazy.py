@@ -56,7 +56,7 @@ def test_a_run_imports_only_its_pipelines_nodes(tmp_path):
     # none of the other stages' node modules, nor the heavy libraries they use
     for other in ("segment", "track", "reconstruct", "calibrate", "viz", "synth", "retarget", "smpl", "evaluate"):
         assert not [m for m in mods if m.startswith(f"tbha_graph.mocap.{other}.")], (other, mods)
-    assert len(mods) <= 20, mods  # 15 measured; importing every node module loads 120
+    assert len(mods) <= 25, mods  # 21 measured (the port types' value modules among them); every node module: 120
     assert not got["scipy_optimize"] and not got["matplotlib"]
 
 
