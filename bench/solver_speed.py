@@ -3,7 +3,9 @@
 
 Prints ``name=value`` lines: ``solver_ms_per_frame_sample``, ``solver_ms_per_frame_10x``, ``peak_mb_sample``,
 ``peak_mb_10x`` (peak traced Python allocations during a second solve; the time is
-the first, untraced one's) and the frame counts.
+the first, untraced one's) and the frame counts, as the default pipeline solves (the focal length from the
+room's lines, ``calibrate.vanishing_points``: one start); ``solver_ms_per_frame_sample_take_alone`` and
+``_10x_take_alone`` without it (three starting focal lengths and their cross seeds).
 
     python bench/solver_speed.py            # tracks from the default pipeline's cache (runs it once)
 """
@@ -25,23 +27,21 @@ from tbha_graph.mocap.body import body_lengths  # noqa: E402
 from tbha_graph.mocap.reconstruct.solve_take import SolveTakeParams, solve_take_arrays  # noqa: E402
 
 
-def sample_tracks() -> dict:
-    import tempfile
-
-    out = Path(tempfile.mkdtemp(prefix="tbha-bench-solver-"))
-    spec = out / "tracks.yaml"
-    spec.write_text(f"extends: {ROOT / 'pipelines' / 'default.yaml'}\noutputs:\n  tracks.npz: track.tracks\n")
-    g = load_graph(spec)
-    run_graph(g, out_dir=out / "run", outputs=["tracks.npz"], cache=Cache(Path.home() / ".cache" / "tbha-graph"))
-    with np.load(out / "run" / "tracks.npz", allow_pickle=False) as z:
-        return {k: z[k] for k in z.files}
+def sample_tracks() -> tuple[dict, tuple[float, float] | None]:
+    """The sample's tracks (the default pipeline's, from the user cache) and the room's focal length
+    ``(px, sd fraction)`` as the pipeline passes it to the solver (None if the room gave none)."""
+    g = load_graph(ROOT / "pipelines" / "default.yaml")
+    run = run_graph(g, outputs=["track", "lens"], cache=Cache(Path.home() / ".cache" / "tbha-graph"))
+    tr, lens = run.output("track.tracks"), run.output("lens.lens")
+    prior = None if lens.focal_px is None else (float(lens.focal_px), float(lens.focal_sd_pct) / 100.0)
+    return {k: np.asarray(v) for k, v in tr.items()}, prior
 
 
-def timed(points, tracked, width, height, fps) -> tuple[float, float]:
+def timed(points, tracked, width, height, fps, lens) -> tuple[float, float]:
     """Wall seconds of one solve (untraced: tracing allocations slows numpy code about 1.7x) and the peak traced
     allocations of a second, identical solve (MB)."""
     def solve():
-        solve_take_arrays(points, tracked, body_lengths(None), width, height, fps, SolveTakeParams())
+        solve_take_arrays(points, tracked, body_lengths(None), width, height, fps, SolveTakeParams(), lens=lens)
 
     t0 = time.perf_counter()
     solve()
@@ -54,20 +54,22 @@ def timed(points, tracked, width, height, fps) -> tuple[float, float]:
 
 
 def main() -> None:
-    tr = sample_tracks()
+    tr, lens = sample_tracks()
     pts, trk = tr["points"], tr["tracked"]
     w, h, fps = int(tr["width"]), int(tr["height"]), float(tr["fps"])
-    dt, peak = timed(pts, trk, w, h, fps)
-    print(f"frames_sample={len(pts)}")
-    print(f"solver_ms_per_frame_sample={1000 * dt / len(pts):.1f}")
-    print(f"peak_mb_sample={peak:.1f}")
     reps = [pts if k % 2 == 0 else pts[::-1] for k in range(10)]
     reps_t = [trk if k % 2 == 0 else trk[::-1] for k in range(10)]
     long_pts, long_trk = np.concatenate(reps), np.concatenate(reps_t)
-    dt, peak = timed(long_pts, long_trk, w, h, fps)
+    print(f"frames_sample={len(pts)}")
     print(f"frames_10x={len(long_pts)}")
-    print(f"solver_ms_per_frame_10x={1000 * dt / len(long_pts):.1f}")
-    print(f"peak_mb_10x={peak:.1f}")
+    print(f"room_focal_px={lens[0] if lens else None}")
+    for suffix, prior in (("", lens), ("_take_alone", None)):
+        dt, peak = timed(pts, trk, w, h, fps, prior)
+        print(f"solver_ms_per_frame_sample{suffix}={1000 * dt / len(pts):.1f}")
+        print(f"peak_mb_sample{suffix}={peak:.1f}")
+        dt, peak = timed(long_pts, long_trk, w, h, fps, prior)
+        print(f"solver_ms_per_frame_10x{suffix}={1000 * dt / len(long_pts):.1f}")
+        print(f"peak_mb_10x{suffix}={peak:.1f}", flush=True)
 
 
 if __name__ == "__main__":
