@@ -60,5 +60,12 @@ def test_metrics_against_ground_truth(run_dir):
     # the solver's fit of the patches as it models them reaches metrics.json beside the joint-centre reprojection
     # (patches sit off their joints): measured 0.22 px median, 0.89 p95, against 3.4 px
     assert m["fit_px_median"] < 0.33 and m["fit_px_p95"] < 1.35 and m["reprojection_px_median"] > 2.0
+    # the room's lines the focal length came from, drawn: both families (red, blue) on the sample's floor
+    import cv2
+
+    lines = cv2.imread(str(run_dir / "room_lines.png"))
+    assert lines.shape == (480, 640, 3)
+    b, g, r = (lines[..., k].astype(int) for k in range(3))
+    assert ((r > 200) & (g < 80) & (b < 80)).sum() > 2000 and ((b > 200) & (r < 80)).sum() > 1000
     manifest = json.loads((run_dir / "manifest.json").read_text())
     assert manifest["nodes"]["reconstruct"]["type"] == "reconstruct.solve_take"

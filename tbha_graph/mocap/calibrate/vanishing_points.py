@@ -30,10 +30,14 @@ from __future__ import annotations
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from ...core.atomic import atomic_write_bytes
 from ...core.node import node
 from ..bundles.lens import LensEstimate
 from ..io.video import iter_frames
-from ..ports import LENS, REPORT, VIDEO
+from ..ports import IMAGE, LENS, REPORT, VIDEO
+
+#: BGR colours of the two families that gave the focal length, then of the others
+FAMILY_COLOURS = ((40, 40, 230), (230, 120, 30), (150, 150, 150))
 
 
 class VanishingParams(BaseModel):
@@ -133,18 +137,20 @@ def focal_from_pair(va: np.ndarray, vb: np.ndarray, centre: np.ndarray) -> float
 
 def estimate_focal(image: np.ndarray, p: VanishingParams) -> dict:
     """``{"focal_px", "focal_sd_pct", "segments", "families": [[x, y] or None, count, length px], "pair",
-    "reason"}`` for one background image; ``focal_px`` None with ``reason`` when no perpendicular pair is found."""
+    "reason"}`` for one background image; ``focal_px`` None with ``reason`` when no perpendicular pair is found.
+    Keys starting with ``_`` hold the segments and their families for :func:`draw_lines`."""
     h, w = image.shape[:2]
     centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
     rng = np.random.default_rng(p.seed)
     seg = line_segments(image, p.min_length * w)
-    out: dict = {"segments": int(len(seg)), "families": [], "focal_px": None, "focal_sd_pct": None}
+    out: dict = {"segments": int(len(seg)), "families": [], "focal_px": None, "focal_sd_pct": None, "_seg": seg}
     if len(seg) < 2 * p.min_segments:
         out["reason"] = f"{len(seg)} straight edges in the background (a plain one?): too few for vanishing points"
         return out
     lines = segment_lines(seg)
     length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
     fams = find_vanishing_points(seg, p, rng)
+    out["_families"] = fams
     points = [refine_point(lines[i], length[i]) for i in fams]
     for v, i in zip(points, fams):
         at = [round(float(v[0] / v[2]), 1), round(float(v[1] / v[2]), 1)] if abs(v[2]) > 1e-12 else None
@@ -174,18 +180,45 @@ def estimate_focal(image: np.ndarray, p: VanishingParams) -> dict:
     boot = np.asarray(boot)
     sd = float(np.nanstd(boot)) * 100.0 if np.isfinite(boot).mean() > 0.9 else float("inf")
     out.update(focal_px=round(f, 2), focal_sd_pct=round(sd, 3) if np.isfinite(sd) else None, pair=[a, b])
+    out["_families"] = fams  # segment indices per family, for the picture (not reported)
     if not np.isfinite(sd):
         out["reason"] = "the bootstrap often finds no focal length: the two directions are nearly degenerate"
     return out
 
 
-@node("calibrate.vanishing_points", version=1, inputs={"video": VIDEO}, outputs={"lens": LENS, "report": REPORT},
-      params=VanishingParams)
+def draw_lines(background: np.ndarray, found: dict, caption: str) -> np.ndarray:
+    """The background (BGR) with the segments coloured by family (the two that gave the focal length red and
+    blue, the others grey), each pair's segments extended towards its vanishing point, and ``caption``."""
+    import cv2
+
+    img = (0.6 * background + 0.4 * 255).astype(np.uint8)  # faded, so the lines stand out
+    seg, fams, pair = found.get("_seg", np.zeros((0, 4))), found.get("_families", []), found.get("pair") or []
+    for s in seg:
+        cv2.line(img, (int(s[0]), int(s[1])), (int(s[2]), int(s[3])), (200, 200, 200), 1, cv2.LINE_AA)
+    for k, idx in enumerate(fams):
+        colour = FAMILY_COLOURS[pair.index(k)] if k in pair else FAMILY_COLOURS[2]
+        for s in seg[idx]:
+            a, b = s[:2], s[2:]
+            if k in pair:  # extended both ways, thin: the lines of a family meet at its vanishing point
+                d = (b - a) / max(np.linalg.norm(b - a), 1e-9) * 4 * img.shape[1]
+                cv2.line(img, tuple(int(v) for v in a - d), tuple(int(v) for v in b + d), colour, 1, cv2.LINE_AA)
+            cv2.line(img, (int(a[0]), int(a[1])), (int(b[0]), int(b[1])), colour, 3, cv2.LINE_AA)
+    h = img.shape[0]
+    cv2.rectangle(img, (0, h - 26), (img.shape[1], h), (255, 255, 255), cv2.FILLED)
+    cv2.putText(img, caption[:110], (6, h - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (30, 30, 30), 1, cv2.LINE_AA)
+    return img
+
+
+@node("calibrate.vanishing_points", version=1, inputs={"video": VIDEO},
+      outputs={"lens": LENS, "report": REPORT, "picture": IMAGE}, params=VanishingParams)
 def vanishing_points(ctx, video) -> dict:
     """The focal length from the room's straight lines (module docstring): ``lens`` for ``reconstruct.solve_take``
     (none, with a warning, when the background shows no two perpendicular families of lines)."""
+    import cv2
+
     p: VanishingParams = ctx.params
-    found = estimate_focal(median_background(video, p.samples), p)
+    background = median_background(video, p.samples)
+    found = estimate_focal(background, p)
     f, sd = found["focal_px"], found["focal_sd_pct"]
     if f is not None and sd is not None and sd <= p.max_sd_pct:
         lens = LensEstimate(focal_px=f, focal_sd_pct=max(sd, 1e-3), width=video.width, height=video.height,
@@ -196,4 +229,7 @@ def vanishing_points(ctx, video) -> dict:
         lens = LensEstimate(width=video.width, height=video.height, source=f"no focal length from the room: {why}")
         ctx.warn(f"no focal length from the room's lines ({why}); it is estimated from the take alone, which "
                  "leaves it 7-60 % open — give focal_px if you know it")
-    return {"lens": lens, "report": {**found, "source": lens.source}}
+    _, png = cv2.imencode(".png", draw_lines(background, found, lens.source))
+    picture = atomic_write_bytes(ctx.output_path("room_lines.png"), png.tobytes())
+    report = {k: v for k, v in found.items() if not k.startswith("_")}
+    return {"lens": lens, "report": {**report, "source": lens.source}, "picture": picture}
