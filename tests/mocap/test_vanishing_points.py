@@ -14,9 +14,12 @@ from tbha_graph.mocap.camera import Camera
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def tiled_floor(eye, target, focal_px: float, width: int = 640, height: int = 480, tile: float = 0.5) -> np.ndarray:
-    """A grey image of a floor (y = 0) tiled in ``tile`` m squares, seen by a camera at ``eye`` looking at ``target``."""
-    cam = Camera.look_at(eye, target, focal_px=focal_px, width=width, height=height)
+def tiled_floor(eye, target, focal_px: float, width: int = 640, height: int = 480, tile: float = 0.5,
+                roll_deg: float = 0.0) -> np.ndarray:
+    """A grey image of a floor (y = 0) tiled in ``tile`` m squares, seen by a camera at ``eye`` looking at ``target``,
+    rolled by ``roll_deg`` about its axis."""
+    up = (np.sin(np.radians(roll_deg)), np.cos(np.radians(roll_deg)), 0.0)
+    cam = Camera.look_at(eye, target, focal_px=focal_px, width=width, height=height, up=up)
     img = np.full((height, width, 3), 120, np.uint8)
     ticks = np.arange(-6.0, 6.0 + 1e-9, tile)
     lines = [((x, 0.0, -6.0), (x, 0.0, 6.0)) for x in ticks] + [((-6.0, 0.0, z), (6.0, 0.0, z)) for z in ticks]
@@ -30,12 +33,14 @@ def tiled_floor(eye, target, focal_px: float, width: int = 640, height: int = 48
     return img
 
 
-@pytest.mark.parametrize("focal, eye", [(500.0, (-1.0, 0.9, 5.0)), (800.0, (2.0, 1.5, 6.0)), (1200.0, (1.5, 1.0, 4.0))])
-def test_focal_from_an_oblique_tiled_floor(focal, eye):
-    found = estimate_focal(tiled_floor(eye, (0.0, 0.5, 0.0), focal), VanishingParams())
-    assert found["focal_px"] is not None, found
-    assert abs(found["focal_px"] / focal - 1.0) < 0.015, found  # measured +0.5, +1.0, -1.0 %
-    assert found["focal_sd_pct"] is not None and found["focal_sd_pct"] < 2.0
+@pytest.mark.parametrize("focal, eye, roll, bound", [(500.0, (-1.0, 0.9, 5.0), 0.0, 0.8), (800.0, (2.0, 1.5, 6.0), 0.0, 1.1),
+                                                (1200.0, (1.5, 1.0, 4.0), 0.0, 1.3), (1200.0, (1.5, 1.0, 4.0), 5.0, 2.4)])
+def test_focal_from_an_oblique_tiled_floor(focal, eye, roll, bound):
+    """Measured +0.46, +0.71, -0.82 % level, and -1.61 % rolled 5° (the level-horizon prior, 1°, yields to the lines)."""
+    found = estimate_focal(tiled_floor(eye, (0.0, 0.5, 0.0), focal, roll_deg=roll), VanishingParams())
+    assert found["focal_px"] is not None and found["level_floor"], found
+    assert abs(found["focal_px"] / focal - 1.0) * 100 < bound, found
+    assert found["focal_sd_pct"] is not None and found["focal_sd_pct"] < 2.4
 
 
 def test_no_focal_from_a_plain_background_or_a_room_seen_square_on():
@@ -47,12 +52,12 @@ def test_no_focal_from_a_plain_background_or_a_room_seen_square_on():
 
 
 def test_the_sample_room_gives_its_focal_length():
-    """The bundled sample (true focal 700 px): within 0.4 % (measured +0.27 %, sd 0.8 %)."""
+    """The bundled sample (true focal 700 px): within 0.45 % (measured +0.30 %, sd 0.8 %)."""
     path = ROOT / "data" / "sample" / "sample.mp4"
     cap = cv2.VideoCapture(str(path))
     n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
     cap.release()
     clip = VideoClip(path=str(path), sha256="-", stop=n, fps=30.0, width=640, height=480)
     found = estimate_focal(median_background(clip, 25), VanishingParams())
-    assert abs(found["focal_px"] / 700.0 - 1.0) < 0.004, found
+    assert abs(found["focal_px"] / 700.0 - 1.0) < 0.0045, found
     assert found["focal_sd_pct"] < 1.2

@@ -53,6 +53,8 @@ class VanishingParams(BaseModel):
     hypotheses: int = Field(2000, ge=100, description="RANSAC candidates per vanishing point")
     bootstrap: int = Field(100, ge=10, description="bootstrap resamples for the focal length's standard deviation")
     max_sd_pct: float = Field(10.0, gt=0, description="a focal length more uncertain than this (1 sd, %) is not passed on", json_schema_extra={"unit": "%"})
+    roll_sd_deg: float = Field(1.0, gt=0, description="prior on the camera's roll when the two families lie on a level "
+                               "floor (a tripod keeps the horizon level)", json_schema_extra={"unit": "deg"})
     seed: int = Field(0, ge=0, description="random seed of RANSAC and the bootstrap")
 
 
@@ -126,6 +128,59 @@ def find_vanishing_points(seg: np.ndarray, p: VanishingParams, rng: np.random.Ge
     return families
 
 
+def signed_sine(seg: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``(k,)``: signed sine of the angle between each segment and the direction from its midpoint to the
+    homogeneous point ``v`` ``(3,)`` (smooth in ``v``, for least squares)."""
+    mid = 0.5 * (seg[:, :2] + seg[:, 2:])
+    d = seg[:, 2:] - seg[:, :2]
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    t = v[None, :2] - mid * v[2]
+    return (t[:, 0] * d[:, 1] - t[:, 1] * d[:, 0]) / np.maximum(np.linalg.norm(t, axis=1), 1e-12)
+
+
+def manhattan_fit(seg: np.ndarray, fam_a: np.ndarray, fam_b: np.ndarray, va: np.ndarray, vb: np.ndarray, f0: float,
+                  centre: np.ndarray, p: "VanishingParams") -> tuple[float, np.ndarray, bool]:
+    """The focal length and the three perpendicular directions ``(3, 3)`` (columns: family a, family b, their
+    normal; camera frame) fitted to every segment of both families at once (each one's angle to its vanishing
+    point, weighted by length), with, when the two families span a level plane (their normal within 25° of the
+    image's vertical: a floor), a prior that the camera is not rolled (``roll_sd_deg``): a tripod keeps the
+    horizon level, which pins a far sideways vanishing point a few lines leave loose. Returns ``(f px,
+    directions, levelled)``."""
+    from scipy.optimize import least_squares
+    from scipy.spatial.transform import Rotation
+
+    def ray(v, f):  # K^-1 v, unit
+        r = np.array([v[0] - centre[0] * v[2], v[1] - centre[1] * v[2], f * v[2]])
+        return r / np.linalg.norm(r)
+
+    da = ray(va, f0)
+    db = ray(vb, f0)
+    db = db - (db @ da) * da
+    db /= np.linalg.norm(db)
+    D0 = np.stack([da, db, np.cross(da, db)], axis=1)
+    levelled = abs(D0[1, 2]) > np.cos(np.radians(25.0))
+    length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
+    wa = length[fam_a] / length.mean()  # a segment's direction is known to about (pixel noise / length)
+    wb = length[fam_b] / length.mean()
+    s_ang, s_roll = np.sin(np.radians(p.angle_deg / 2.0)), np.sin(np.radians(p.roll_sd_deg))
+
+    def directions(x):
+        return Rotation.from_rotvec(x[1:]).as_matrix() @ D0
+
+    def vp(d, f):
+        return np.array([f * d[0] + centre[0] * d[2], f * d[1] + centre[1] * d[2], d[2]])
+
+    def residuals(x):
+        f, D = np.exp(x[0]), directions(x)
+        out = [signed_sine(seg[fam_a], vp(D[:, 0], f)) * wa / s_ang, signed_sine(seg[fam_b], vp(D[:, 1], f)) * wb / s_ang]
+        if levelled:  # the plane's normal (up or down) has no sideways component in the camera frame
+            out.append(np.array([D[0, 2] / s_roll]))
+        return np.concatenate(out)
+
+    sol = least_squares(residuals, np.r_[np.log(f0), 0.0, 0.0, 0.0], method="lm")
+    return float(np.exp(sol.x[0])), directions(sol.x), bool(levelled)
+
+
 def focal_from_pair(va: np.ndarray, vb: np.ndarray, centre: np.ndarray) -> float | None:
     """Focal length (px) from two homogeneous vanishing points of perpendicular directions; None if not finite
     or the geometry gives none."""
@@ -170,16 +225,18 @@ def estimate_focal(image: np.ndarray, p: VanishingParams) -> dict:
         out["reason"] = (f"{len(fams)} vanishing points, no two of them perpendicular with a plausible focal length "
                          "(a room seen square-on keeps its sideways lines parallel)")
         return out
-    _, a, b, f = best
+    _, a, b, f_pair = best
+    f, _, levelled = manhattan_fit(seg, fams[a], fams[b], points[a], points[b], f_pair, centre, p)
     boot = []
     for _ in range(p.bootstrap):
         ia = rng.choice(fams[a], len(fams[a]))
         ib = rng.choice(fams[b], len(fams[b]))
-        fb = focal_from_pair(refine_point(lines[ia], length[ia]), refine_point(lines[ib], length[ib]), centre)
-        boot.append(np.log(fb) if fb is not None else np.nan)
+        fb = manhattan_fit(seg, ia, ib, points[a], points[b], f, centre, p)[0]
+        boot.append(np.log(fb) if 0.3 * w <= fb <= 8.0 * w else np.nan)
     boot = np.asarray(boot)
     sd = float(np.nanstd(boot)) * 100.0 if np.isfinite(boot).mean() > 0.9 else float("inf")
-    out.update(focal_px=round(f, 2), focal_sd_pct=round(sd, 3) if np.isfinite(sd) else None, pair=[a, b])
+    out.update(focal_px=round(f, 2), focal_sd_pct=round(sd, 3) if np.isfinite(sd) else None, pair=[a, b],
+               focal_pair_px=round(f_pair, 2), level_floor=levelled)
     out["_families"] = fams  # segment indices per family, for the picture (not reported)
     if not np.isfinite(sd):
         out["reason"] = "the bootstrap often finds no focal length: the two directions are nearly degenerate"
