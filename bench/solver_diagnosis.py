@@ -11,7 +11,8 @@ take, no scale; the solver as the default pipeline runs it, tracks and silhouett
   ``<take>_own_cost_over_truth_minimum_pct``: that solution, polished as the line above was, costs this much
   more than the truth's minimum (> 0: the objective prefers the truth's minimum and the search missed it).
 * ``<take>_focal_err_pct_{min,median,max}`` and ``<take>_estimated_mm_{min,median,max}``: the focal length
-  estimated (the default), each of five times with the starting focal lengths (``focal_grid``) scaled by
+  estimated from the take alone (the default pipeline's fallback when the room's lines give none:
+  ``calibrate.vanishing_points`` is not used here), each of five times with the starting focal lengths (``focal_grid``) scaled by
   0.9, 0.95, 1, 1.05, 1.1. A take that determines its focal length gives the same answer every time; the
   spread shows how much of an estimate is luck (``_at_default`` gives the unscaled run's figures).
 
