@@ -75,8 +75,11 @@ def print_summary(run, out_dir: Path, verbose: bool = False) -> None:
             shown = [k for k in HEADLINE if isinstance(metrics.get(k), (int, float)) and not isinstance(metrics.get(k), bool)]
             text = {k: fmt_value(metrics[k]) for k in shown}
             lo, hi = metrics.get("focal_fits_px_min"), metrics.get("focal_fits_px_max")
+            source = str(metrics.get("focal_source", ""))
             if "focal_px" in text and isinstance(lo, (int, float)) and isinstance(hi, (int, float)) and hi > lo:
                 text["focal_px"] += f" (fits {lo:.0f}-{hi:.0f})"  # how open the take leaves it
+            elif "focal_px" in text and source:  # where it came from: given, or the room's lines
+                text["focal_px"] += " (given)" if source == "given" else " (room lines)" if source.startswith("room") else ""
             for i in range(0, len(shown), 3):  # three a line: the summary stays short with warnings below
                 print("  " + "   ".join(f"{k} {text[k]}" for k in shown[i : i + 3]))
     if warnings:
