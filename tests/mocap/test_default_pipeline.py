@@ -69,3 +69,15 @@ def test_metrics_against_ground_truth(run_dir):
     assert ((r > 200) & (g < 80) & (b < 80)).sum() > 2000 and ((b > 200) & (r < 80)).sum() > 1000
     manifest = json.loads((run_dir / "manifest.json").read_text())
     assert manifest["nodes"]["reconstruct"]["type"] == "reconstruct.solve_take"
+
+
+def test_summary_says_where_the_focal_length_came_from(run_dir, monkeypatch, capsys):
+    """The run summary's focal length names its source: the room's lines on the sample (cached: no re-run)."""
+    import re
+
+    from tbha_graph.cli.run import main
+
+    monkeypatch.setenv("TBHA_CACHE_DIR", str(run_dir.parent / "cache"))
+    assert main([str(ROOT / "pipelines" / "default.yaml"), "--out", str(run_dir.parent / "again"), "-q"]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"focal_px 70\d(\.\d+)? \(room lines\)", out), out
