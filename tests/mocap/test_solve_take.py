@@ -55,10 +55,10 @@ def problem(truth, P, uv, centre, L, weights: Weights, free_offsets=False, focal
     return prob, d
 
 
-@pytest.mark.parametrize("free_offsets,free_lengths,split,sil", [(False, False, False, False), (True, False, False, False),
-                                                                 (False, True, False, False), (False, False, True, False),
-                                                                 (False, False, False, True)])
-def test_block_normal_equations_equal_the_dense_ones(truth, free_offsets, free_lengths, split, sil, monkeypatch):
+@pytest.mark.parametrize("free_offsets,free_lengths,split,sil,priors", [(False, False, False, False, False), (True, False, False, False, False),
+                                                                        (False, True, False, False, False), (False, False, True, False, False),
+                                                                        (False, False, False, True, False), (False, False, False, False, True)])
+def test_block_normal_equations_equal_the_dense_ones(truth, free_offsets, free_lengths, split, sil, priors, monkeypatch):
     from tbha_graph.mocap.reconstruct import take_solver
 
     monkeypatch.setattr(take_solver, "JACOBIAN_CHUNK", 4)  # the frame Jacobian in chunks of 4, 4 and 1 frames
@@ -82,6 +82,10 @@ def test_block_normal_equations_equal_the_dense_ones(truth, free_offsets, free_l
         prob.d.contact[:] = True
         assert not prob.slide_vectors(P, prob.n_ref)[1][4].any() and prob.slide_vectors(P, prob.n_ref)[1][5].all()
         prob.d.contact[:] = contacts_from_image(uv, np.ones(uv.shape[:2], bool), float(truth["fps"]))
+    if priors:  # a known focal length and the room's floor normal (3 degrees off this floor's): both in the globals' rows
+        tilted = truth["R"][:, 1] + np.array([0.0, 0.0, 0.05])
+        prob.focal_prior = (700.0, 0.02)
+        prob.floor_prior = (tilted / np.linalg.norm(tilted), np.radians(0.5))
     lu = 0.02 * np.random.default_rng(2).standard_normal(15)
     x = np.concatenate([globals_vector(660.0, d, free_offsets, free_lengths, lu), pack_initial(P, prob.ref)])
     x[prob.n_glob:] += 0.01 * np.random.default_rng(1).standard_normal(x.size - prob.n_glob)

@@ -16,3 +16,6 @@ class LensEstimate(BaseModel):
     width: int = Field(gt=0, description="image width it refers to, pixels")
     height: int = Field(gt=0, description="image height it refers to, pixels")
     source: str = Field(description="how it was found, or why it was not")
+    up_cam: list[float] | None = Field(None, min_length=3, max_length=3, description="the floor's up direction in "
+                                       "the camera frame (x right, y down, z forward), unit, when the lines lie on a floor")
+    up_sd_deg: float | None = Field(None, gt=0, description="its standard deviation, degrees")

@@ -226,17 +226,22 @@ def estimate_focal(image: np.ndarray, p: VanishingParams) -> dict:
                          "(a room seen square-on keeps its sideways lines parallel)")
         return out
     _, a, b, f_pair = best
-    f, _, levelled = manhattan_fit(seg, fams[a], fams[b], points[a], points[b], f_pair, centre, p)
-    boot = []
+    f, D, levelled = manhattan_fit(seg, fams[a], fams[b], points[a], points[b], f_pair, centre, p)
+    up = -np.sign(D[1, 2]) * D[:, 2]  # the floor's normal, pointing up (camera y is down)
+    boot, tilt = [], []
     for _ in range(p.bootstrap):
         ia = rng.choice(fams[a], len(fams[a]))
         ib = rng.choice(fams[b], len(fams[b]))
-        fb = manhattan_fit(seg, ia, ib, points[a], points[b], f, centre, p)[0]
+        fb, Db, _ = manhattan_fit(seg, ia, ib, points[a], points[b], f, centre, p)
         boot.append(np.log(fb) if 0.3 * w <= fb <= 8.0 * w else np.nan)
+        tilt.append(np.degrees(np.arccos(np.clip(abs(Db[:, 2] @ up), -1.0, 1.0))))
     boot = np.asarray(boot)
     sd = float(np.nanstd(boot)) * 100.0 if np.isfinite(boot).mean() > 0.9 else float("inf")
     out.update(focal_px=round(f, 2), focal_sd_pct=round(sd, 3) if np.isfinite(sd) else None, pair=[a, b],
                focal_pair_px=round(f_pair, 2), level_floor=levelled)
+    if levelled:  # the two families span the floor: its normal too (the camera's tilt and roll)
+        out.update(up_cam=[round(float(v), 6) for v in up],
+                   up_sd_deg=round(max(float(np.sqrt(np.mean(np.square(tilt)))), 0.05), 3))
     out["_families"] = fams  # segment indices per family, for the picture (not reported)
     if not np.isfinite(sd):
         out["reason"] = "the bootstrap often finds no focal length: the two directions are nearly degenerate"
@@ -279,7 +284,9 @@ def vanishing_points(ctx, video) -> dict:
     f, sd = found["focal_px"], found["focal_sd_pct"]
     if f is not None and sd is not None and sd <= p.max_sd_pct:
         lens = LensEstimate(focal_px=f, focal_sd_pct=max(sd, 1e-3), width=video.width, height=video.height,
-                            source=f"vanishing points of the room's lines: {f:.0f} px ± {sd:.1f} %")
+                            source=f"vanishing points of the room's lines: {f:.0f} px ± {sd:.1f} %"
+                                   + (", and the floor's tilt" if found.get("up_cam") else ""),
+                            up_cam=found.get("up_cam"), up_sd_deg=found.get("up_sd_deg"))
         ctx.log(lens.source)
     else:
         why = found.get("reason") or f"too uncertain: {f:.0f} px ± {sd:.0f} % (1 sd)"

@@ -254,6 +254,10 @@ POSE_TOL = 1e-3
 #: focal length, makes the difference (131_01 given its true focal length: 94 mm)
 LENS_SD_FLOOR = 0.015
 
+#: Keep the floor's normal near the room's (when the room's lines lie on the floor), at least this uncertain
+FLOOR_PRIOR = True
+FLOOR_SD_FLOOR_DEG = 0.5
+
 #: Search the body's turning direction on the torso-unseen runs in the final pose solve
 #: (:func:`.take_solver.search_turns_lm`)
 TURN_SEARCH = True
@@ -310,9 +314,10 @@ def facing_away(weight: np.ndarray) -> np.ndarray:
 
 def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: SolveTakeParams, free_offsets: bool,
                  focal_prior=None, contact=None, held_globals: np.ndarray | None = None,
-                 silhouette: SilhouetteField | None = None) -> tuple[TakeProblem, float]:
+                 silhouette: SilhouetteField | None = None, floor_prior=None) -> tuple[TakeProblem, float]:
     """A :class:`TakeProblem` around joints ``P`` and a floor ``(normal (3,), offset)`` (or a camera whose world
-    y is up); contacts detected from ``P`` unless given; the actor's ``silhouette`` on these frames, if any.
+    y is up); contacts detected from ``P`` unless given; the actor's ``silhouette`` on these frames, if any;
+    ``floor_prior`` ``(up (3,) camera frame, sd radians)``, the floor's normal as the room shows it, if known.
     Returns the problem and the floor offset."""
     if isinstance(cam_or_floor, Camera):
         nf, d = cam_or_floor.R[:, 1], float(-cam_or_floor.R[:, 1] @ cam_or_floor.t)
@@ -328,18 +333,18 @@ def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: Solve
                 sigma_sil=p.sigma_sil)
     offsets = point_offsets_of(p)
     return TakeProblem(data, bone_directions(P), nf, w, offsets, fixed_globals=held_globals, free_offsets=free_offsets,
-                       focal_prior=focal_prior, free_lengths=p.free_lengths), d
+                       focal_prior=focal_prior, free_lengths=p.free_lengths, floor_prior=floor_prior), d
 
 
 def solve_frames(points, weight, lengths, centre, fps, P0, floor, g_start, p, iterations, free_offsets, focal_prior,
                  side_search: bool, contact: np.ndarray | None = None, hold_globals: bool = False, tol: float = 1e-5,
-                 silhouette: SilhouetteField | None = None):
+                 silhouette: SilhouetteField | None = None, floor_prior=None):
     """Whole-take solve from joints ``P0``: LM, then (optionally) the depth-side search and LM again; the globals
     ``g_start`` held when ``hold_globals`` (a window of a long take: camera and floor known); the actor's
     ``silhouette`` on these frames, if any. Returns ``(problem, x, cost, normal equations, flips kept)``."""
     def start(P, fl, g):
         prob, _ = make_problem(points, weight, lengths, centre, fps, P, fl, p, free_offsets, focal_prior, contact,
-                               g if hold_globals else None, silhouette)
+                               g if hold_globals else None, silhouette, floor_prior)
         x = pack_initial(P, prob.ref)
         return prob, (x if hold_globals else np.concatenate([g, x]))
 
@@ -454,12 +459,13 @@ def world_frame(P: np.ndarray, nf: np.ndarray, d: float) -> tuple[np.ndarray, np
 
 def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarray, width: int, height: int,
                       fps: float, p: SolveTakeParams, progress=None, confidence: np.ndarray | None = None,
-                      silhouette: SilhouetteField | None = None, lens: tuple[float, float] | None = None) -> dict:
+                      silhouette: SilhouetteField | None = None, lens: tuple | None = None) -> dict:
     """The whole solve (see the module docstring) on 2D points ``(n, 16, 2)`` px; ``progress`` (optional, as
     ``ctx.progress``: wraps an iterable) shows the starts and the pose windows; ``silhouette`` (optional) the
     actor's outline on every frame; ``lens`` (optional) a focal length found before, ``(px, sd as a fraction)``:
     without ``p.focal_px`` the solve starts there and keeps it as a prior (its sd and :data:`LENS_SD_FLOOR`
-    combined). Returns a dict with
+    combined); with two more items ``(up (3,) camera frame, sd degrees)`` (or Nones) the floor's normal found
+    with it, kept as a prior too (sd at least :data:`FLOOR_SD_FLOOR_DEG`). Returns a dict with
     ``joints`` (n, 16, 3) world metres, ``camera`` (:class:`Camera`), ``sides`` (n, 16) int8, ``report``.
 
     BLAS runs on one thread meanwhile: the solver's matrices are small (33 x 33 frame blocks, a band of 99),
@@ -475,6 +481,7 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
 def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams, progress, confidence, sil,
                 lens=None) -> dict:
     t0 = time.perf_counter()
+    floor_prior = None
     n = points.shape[0]
     centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
     weight = tracked.astype(np.float64)
@@ -495,6 +502,11 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
         # a focal length from the room (calibrate.vanishing_points): one start there, kept as a prior; the take
         # alone leaves the focal length 7-60 % open (bench/focal_profile.py), the room's lines fix it to a few %
         sd = float(np.hypot(lens[1], LENS_SD_FLOOR))
+        if len(lens) > 2 and lens[2] is not None and FLOOR_PRIOR:  # and the floor's normal, when the lines lie on it
+            floor_prior = (np.asarray(lens[2], dtype=np.float64), np.radians(max(float(lens[3]), FLOOR_SD_FLOOR_DEG)))
+            report["floor_source"] = "room lines"
+        else:
+            floor_prior = None
         starts, focal_prior = [float(lens[0])], (float(lens[0]), sd)
         report["focal_source"] = f"room lines {lens[0]:.0f} px ± {100 * lens[1]:.1f} %, refined by the take"
         q, estimated = p, False  # solved as with a given focal length, which the prior lets move by a few %
@@ -516,7 +528,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
         g0 = globals_vector(f0, float(-cam.R[:, 1] @ cam.t), False, p.free_lengths)
         prob_k, x_k, cost_k, _, kept = solve_frames(points[sub], weight[sub], lengths, centre, fps / step, P0[sub], cam,
                                                     g0, q, p.calib_iterations, False, focal_prior, p.side_search,
-                                                    contact[sub])
+                                                    contact[sub], floor_prior=floor_prior)
         f_end = float(np.exp(prob_k.globals_of(x_k)[0]))
         sweep.append([round(f0, 1), round(f_end, 1), round(cost_k, 1)])
         if best is None or cost_k < best[0]:
@@ -540,7 +552,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
             gs = np.concatenate([[np.log(f_end), 0.0, 0.0, d_k], probs.globals_of(xs)[4:]])
             prob_k, x_k, cost_k, _, _ = solve_frames(points[sub], weight[sub], lengths, centre, fps / step, P_k,
                                                      (nf_b, d_k), gs, q, p.calib_iterations, False,
-                                                     focal_prior, False, contact[sub])
+                                                     focal_prior, False, contact[sub], floor_prior=floor_prior)
             cross.append([round(f_end, 1), round(float(np.exp(prob_k.globals_of(x_k)[0])), 1), round(cost_k, 1)])
         report["focal_cross_seeded"] = cross
         sweep = sweep + cross
@@ -554,7 +566,8 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
     P1 = interpolate_joints(probs.solution(xs)[4], sub, n)
     gs = np.concatenate([g_sub[:1], [0.0, 0.0, d0], g_sub[4:]])
     prob, x, cost, ne, _ = solve_frames(points[cam_rows], weight[cam_rows], lengths, centre, fps / k_cam, P1[cam_rows],
-                                        (nf0, d0), gs, q, p.max_iterations, False, focal_prior, False, contact[cam_rows])
+                                        (nf0, d0), gs, q, p.max_iterations, False, focal_prior, False, contact[cam_rows],
+                                        floor_prior=floor_prior)
     kept2 = 0
     # uncertainty of the focal length (log f) from the normal equations, scaled by the fit's residual level
     dof = max(prob.residuals(x).size - x.size, 1)
@@ -571,7 +584,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
             P_s = seat_on_outline(P_s, f_sel, centre, nf_s, d_s, sil, facing_away(weight))
         prob, x, cost, ne, kept2 = solve_frames(points, weight, lengths, centre, fps, P_s, (nf_s, d_s), g_s, p,
                                                 p.max_iterations, False, (f_sel, 1e-4), p.side_search, contact,
-                                                tol=POSE_TOL, silhouette=sil)
+                                                tol=POSE_TOL, silhouette=sil, floor_prior=floor_prior)
     elif not whole:  # the same in windows, camera and floor held
         f_sel, nf_s, d_s, _, P_s = prob.solution(x)
         g_s = np.concatenate([[np.log(f_sel), 0.0, 0.0, d_s], prob.globals_of(x)[4:]])
@@ -677,7 +690,7 @@ def solve_take(ctx, tracks, body, silhouette=None, lens=None):
         if (lens.width, lens.height) != (tr.width, tr.height):
             raise NodeError(f"the lens estimate is for {lens.width}x{lens.height} px images, the tracks are "
                             f"{tr.width}x{tr.height}", hint="connect the lens found on the same video as the tracks")
-        prior = (float(lens.focal_px), float(lens.focal_sd_pct or 0.0) / 100.0)
+        prior = (float(lens.focal_px), float(lens.focal_sd_pct or 0.0) / 100.0, lens.up_cam, lens.up_sd_deg)
     out = solve_take_arrays(tr.points, tr.tracked, lengths, tr.width, tr.height, float(tr.fps), p,
                             progress=ctx.progress, confidence=confidence, silhouette=sil, lens=prior)
     rep = out["report"]

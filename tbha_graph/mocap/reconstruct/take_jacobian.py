@@ -403,4 +403,8 @@ def global_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: dict
         fp = np.zeros((1, G))
         fp[0, 0] = 1.0 / prob.focal_prior[1]
         prior = np.concatenate([prior, fp])
+    if prob.floor_prior is not None:  # the floor's normal against the room's: d normal / d (g1, g2)
+        up = np.zeros((3, G))
+        up[:, 1:3] = f1 / prob.floor_prior[1]
+        prior = np.concatenate([prior, up])
     return np.concatenate([Jf.reshape(n * F, G), Ja.reshape(-1, G), Js.reshape(n * 2, G), prior])

@@ -507,13 +507,16 @@ class TakeProblem:
 
     def __init__(self, data: TakeData, ref: np.ndarray, n_ref: np.ndarray, weights: Weights,
                  offsets0: np.ndarray, fixed_globals: np.ndarray | None = None, free_offsets: bool = True,
-                 focal_prior: tuple[float, float] | None = None, free_lengths: bool = False):
+                 focal_prior: tuple[float, float] | None = None, free_lengths: bool = False,
+                 floor_prior: tuple[np.ndarray, float] | None = None):
         self.d, self.w = data, weights
         self.n = data.points.shape[0]
         self.offsets0 = offsets0
         self.layout = Layout(self.n, free_offsets, free_lengths)
         self.fixed_globals = None if fixed_globals is None else np.asarray(fixed_globals, dtype=np.float64)
         self.focal_prior = focal_prior  # (focal px, sigma of log f): a known focal length held (nearly) fixed
+        # (up (3,) camera frame, sigma radians): the floor's normal as the room's lines show it
+        self.floor_prior = None if floor_prior is None else (unit(np.asarray(floor_prior[0], dtype=np.float64)), float(floor_prior[1]))
         self.n_glob = 0 if fixed_globals is not None else self.layout.n_globals
         self.n_frame_res = N_FRAME_RES + (N_SIL + N_COVER + 1 if data.silhouette is not None else 0)
         self.set_refs(ref, n_ref)
@@ -638,6 +641,8 @@ class TakeProblem:
                 out.append(np.log(self.lengths_of(g)[1:] / self.d.lengths[1:]) / self.w.sigma_length)
             if self.focal_prior is not None:
                 out.append(np.array([(g[0] - np.log(self.focal_prior[0])) / self.focal_prior[1]]))
+            if self.floor_prior is not None:
+                out.append((self.floor(g)[0] - self.floor_prior[0]) / self.floor_prior[1])
         return np.concatenate(out) if out else np.zeros(0)
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
