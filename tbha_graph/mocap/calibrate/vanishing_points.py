@@ -17,8 +17,13 @@ at the room obliquely).
    ``max_points`` times at most.
 4. **Focal length**: of the pairs of finite vanishing points whose ``f`` lies in 0.3-8 x the image width
    and whose families each carry ``min_share`` of all the segments' length, the one whose weaker family has
-   the most; its standard deviation from a bootstrap over the
-   two families' segments (``bootstrap`` resamples).
+   the most. From that start, one least-squares fit of the focal length and the three perpendicular
+   directions (camera frame) to every segment of both families (:func:`manhattan_fit`: each segment's angle
+   to its vanishing point, weighted by its length; when the two families span a level floor, a prior that
+   the camera is not rolled, ``roll_sd_deg``, which pins a far sideways vanishing point that few lines leave
+   loose). Its standard deviation from a bootstrap over the two families' segments (``bootstrap``
+   resamples); when they lie on the floor, the floor's up direction in the camera frame too (the camera's
+   tilt and roll), for the solver's floor.
 
 No such pair (a plain background; a room seen square-on, whose sideways lines stay parallel in the image)
 gives ``focal_px`` None and a warning: the solver then estimates the focal length from the take alone. The
@@ -242,7 +247,6 @@ def estimate_focal(image: np.ndarray, p: VanishingParams) -> dict:
     if levelled:  # the two families span the floor: its normal too (the camera's tilt and roll)
         out.update(up_cam=[round(float(v), 6) for v in up],
                    up_sd_deg=round(max(float(np.sqrt(np.mean(np.square(tilt)))), 0.05), 3))
-    out["_families"] = fams  # segment indices per family, for the picture (not reported)
     if not np.isfinite(sd):
         out["reason"] = "the bootstrap often finds no focal length: the two directions are nearly degenerate"
     return out

@@ -505,8 +505,6 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
         if len(lens) > 2 and lens[2] is not None and FLOOR_PRIOR:  # and the floor's normal, when the lines lie on it
             floor_prior = (np.asarray(lens[2], dtype=np.float64), np.radians(max(float(lens[3]), FLOOR_SD_FLOOR_DEG)))
             report["floor_source"] = "room lines"
-        else:
-            floor_prior = None
         starts, focal_prior = [float(lens[0])], (float(lens[0]), sd)
         report["focal_source"] = f"room lines {lens[0]:.0f} px ± {100 * lens[1]:.1f} %, refined by the take"
         q, estimated = p, False  # solved as with a given focal length, which the prior lets move by a few %
