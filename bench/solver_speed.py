@@ -28,12 +28,13 @@ from tbha_graph.mocap.reconstruct.solve_take import SolveTakeParams, solve_take_
 
 
 def sample_tracks() -> tuple[dict, tuple[float, float] | None]:
-    """The sample's tracks (the default pipeline's, from the user cache) and the room's focal length
-    ``(px, sd fraction)`` as the pipeline passes it to the solver (None if the room gave none)."""
+    """The sample's tracks (the default pipeline's, from the user cache) and the room's focal length and floor
+    ``(px, sd fraction, up, up sd deg)`` as the pipeline passes them to the solver (None if the room gave none)."""
     g = load_graph(ROOT / "pipelines" / "default.yaml")
     run = run_graph(g, outputs=["track", "lens"], cache=Cache(Path.home() / ".cache" / "tbha-graph"))
     tr, lens = run.output("track.tracks"), run.output("lens.lens")
-    prior = None if lens.focal_px is None else (float(lens.focal_px), float(lens.focal_sd_pct) / 100.0)
+    prior = None if lens.focal_px is None else (float(lens.focal_px), float(lens.focal_sd_pct) / 100.0, lens.up_cam,
+                                                lens.up_sd_deg)
     return {k: np.asarray(v) for k, v in tr.items()}, prior
 
 
