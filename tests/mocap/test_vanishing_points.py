@@ -61,3 +61,27 @@ def test_the_sample_room_gives_its_focal_length():
     found = estimate_focal(median_background(clip, 25), VanishingParams())
     assert abs(found["focal_px"] / 700.0 - 1.0) < 0.0045, found
     assert found["focal_sd_pct"] < 1.2
+
+
+def test_a_plain_room_gives_no_lens_and_a_warning_the_run_reports(tmp_path):
+    """Through the framework: the node's warning reaches the run (and so metrics.json and the summary), the lens
+    is empty (the solver then falls back on the take) and the picture says why."""
+    from tbha_graph.core.cache import Cache
+    from tbha_graph.core.runner import load_graph, run_graph
+
+    video = tmp_path / "plain.mp4"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"mp4v"), 30.0, (320, 240))
+    for k in range(12):  # a grey wall and a blob moving across it
+        frame = np.full((240, 320, 3), 128, np.uint8)
+        cv2.circle(frame, (40 + 20 * k, 120), 15, (200, 200, 200), -1)
+        writer.write(frame)
+    writer.release()
+    spec = tmp_path / "p.yaml"
+    spec.write_text(f"nodes:\n  decode: {{type: io.video, params: {{path: {video}}}}}\n"
+                    "  lens: {type: calibrate.vanishing_points, inputs: {video: decode.video}}\n"
+                    "outputs: {room_lines.png: lens.picture}\n")
+    run = run_graph(load_graph(spec), out_dir=tmp_path / "run", cache=Cache(tmp_path / "cache"))
+    lens = run.output("lens.lens")
+    assert lens.focal_px is None and "too few" in lens.source
+    assert any(w["node"] == "lens" and "no focal length from the room" in w["message"] for w in run.node_warnings())
+    assert cv2.imread(str(tmp_path / "run" / "room_lines.png")).shape == (240, 320, 3)
