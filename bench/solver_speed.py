@@ -27,15 +27,13 @@ from tbha_graph.mocap.body import body_lengths  # noqa: E402
 from tbha_graph.mocap.reconstruct.solve_take import SolveTakeParams, solve_take_arrays  # noqa: E402
 
 
-def sample_tracks() -> tuple[dict, tuple[float, float] | None]:
+def sample_tracks() -> tuple[dict, "LensEstimate | None"]:
     """The sample's tracks (the default pipeline's, from the user cache) and the room's focal length and floor
-    ``(px, sd fraction, up, up sd deg)`` as the pipeline passes them to the solver (None if the room gave none)."""
+    (the ``lens`` the pipeline passes to the solver; None if the room gave none)."""
     g = load_graph(ROOT / "pipelines" / "default.yaml")
     run = run_graph(g, outputs=["track", "lens"], cache=Cache(Path.home() / ".cache" / "tbha-graph"))
     tr, lens = run.output("track.tracks"), run.output("lens.lens")
-    prior = None if lens.focal_px is None else (float(lens.focal_px), float(lens.focal_sd_pct) / 100.0, lens.up_cam,
-                                                lens.up_sd_deg)
-    return {k: np.asarray(v) for k, v in tr.items()}, prior
+    return {k: np.asarray(v) for k, v in tr.items()}, (lens if lens.focal_px is not None else None)
 
 
 def timed(points, tracked, width, height, fps, lens) -> tuple[float, float]:
@@ -63,7 +61,7 @@ def main() -> None:
     long_pts, long_trk = np.concatenate(reps), np.concatenate(reps_t)
     print(f"frames_sample={len(pts)}")
     print(f"frames_10x={len(long_pts)}")
-    print(f"room_focal_px={lens[0] if lens else None}")
+    print(f"room_focal_px={lens.focal_px if lens else None}")
     for suffix, prior in (("", lens), ("_take_alone", None)):
         dt, peak = timed(pts, trk, w, h, fps, prior)
         print(f"solver_ms_per_frame_sample{suffix}={1000 * dt / len(pts):.1f}")

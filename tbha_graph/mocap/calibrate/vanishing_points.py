@@ -88,15 +88,20 @@ def segment_lines(seg: np.ndarray) -> np.ndarray:
     return ln / np.linalg.norm(ln[:, :2], axis=1, keepdims=True)
 
 
-def pointing_sine(seg: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """``(m, k)``: sine of the angle between each of ``k`` segments and the direction from its midpoint to each
-    of ``m`` homogeneous points ``v`` ``(m, 3)`` (a point at infinity: its direction)."""
+def signed_sine(seg: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``(m, k)``: signed sine of the angle between each of ``k`` segments and the direction from its midpoint to
+    each of ``m`` homogeneous points ``v`` ``(m, 3)`` (a point at infinity: its direction); smooth in ``v``."""
     mid = 0.5 * (seg[:, :2] + seg[:, 2:])
     d = seg[:, 2:] - seg[:, :2]
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     t = v[:, None, :2] - mid[None] * v[:, None, 2:3]  # (m, k, 2), up to sign and scale
-    cross = np.abs(t[..., 0] * d[None, :, 1] - t[..., 1] * d[None, :, 0])
+    cross = t[..., 0] * d[None, :, 1] - t[..., 1] * d[None, :, 0]
     return cross / np.maximum(np.linalg.norm(t, axis=-1), 1e-12)
+
+
+def pointing_sine(seg: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``(m, k)``: how far (sine of the angle) each segment is from pointing at each point (:func:`signed_sine`)."""
+    return np.abs(signed_sine(seg, v))
 
 
 def refine_point(lines: np.ndarray, weight: np.ndarray) -> np.ndarray:
@@ -133,16 +138,6 @@ def find_vanishing_points(seg: np.ndarray, p: VanishingParams, rng: np.random.Ge
     return families
 
 
-def signed_sine(seg: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """``(k,)``: signed sine of the angle between each segment and the direction from its midpoint to the
-    homogeneous point ``v`` ``(3,)`` (smooth in ``v``, for least squares)."""
-    mid = 0.5 * (seg[:, :2] + seg[:, 2:])
-    d = seg[:, 2:] - seg[:, :2]
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    t = v[None, :2] - mid * v[2]
-    return (t[:, 0] * d[:, 1] - t[:, 1] * d[:, 0]) / np.maximum(np.linalg.norm(t, axis=1), 1e-12)
-
-
 def manhattan_fit(seg: np.ndarray, fam_a: np.ndarray, fam_b: np.ndarray, va: np.ndarray, vb: np.ndarray, f0: float,
                   centre: np.ndarray, p: "VanishingParams") -> tuple[float, np.ndarray, bool]:
     """The focal length and the three perpendicular directions ``(3, 3)`` (columns: family a, family b, their
@@ -177,7 +172,8 @@ def manhattan_fit(seg: np.ndarray, fam_a: np.ndarray, fam_b: np.ndarray, va: np.
 
     def residuals(x):
         f, D = np.exp(x[0]), directions(x)
-        out = [signed_sine(seg[fam_a], vp(D[:, 0], f)) * wa / s_ang, signed_sine(seg[fam_b], vp(D[:, 1], f)) * wb / s_ang]
+        out = [signed_sine(seg[fam_a], vp(D[:, 0], f)[None])[0] * wa / s_ang,
+               signed_sine(seg[fam_b], vp(D[:, 1], f)[None])[0] * wb / s_ang]
         if levelled:  # the plane's normal (up or down) has no sideways component in the camera frame
             out.append(np.array([D[0, 2] / s_roll]))
         return np.concatenate(out)

@@ -87,6 +87,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.errors import NodeError
 from ...core.node import node, optional
+from ..bundles.lens import LensEstimate
 from ..bundles.tracks import read_tracks
 from ..calibrate.pnp import solve_pnp_planar
 from ..camera import Camera
@@ -254,8 +255,7 @@ POSE_TOL = 1e-3
 #: focal length, makes the difference (131_01 given its true focal length: 94 mm)
 LENS_SD_FLOOR = 0.015
 
-#: Keep the floor's normal near the room's (when the room's lines lie on the floor), at least this uncertain
-FLOOR_PRIOR = True
+#: The floor's normal is kept near the room's (when the room's lines lie on the floor), at least this uncertain, degrees
 FLOOR_SD_FLOOR_DEG = 0.5
 
 #: Search the body's turning direction on the torso-unseen runs in the final pose solve
@@ -459,13 +459,13 @@ def world_frame(P: np.ndarray, nf: np.ndarray, d: float) -> tuple[np.ndarray, np
 
 def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarray, width: int, height: int,
                       fps: float, p: SolveTakeParams, progress=None, confidence: np.ndarray | None = None,
-                      silhouette: SilhouetteField | None = None, lens: tuple | None = None) -> dict:
+                      silhouette: SilhouetteField | None = None, lens: LensEstimate | None = None) -> dict:
     """The whole solve (see the module docstring) on 2D points ``(n, 16, 2)`` px; ``progress`` (optional, as
     ``ctx.progress``: wraps an iterable) shows the starts and the pose windows; ``silhouette`` (optional) the
-    actor's outline on every frame; ``lens`` (optional) a focal length found before, ``(px, sd as a fraction)``:
-    without ``p.focal_px`` the solve starts there and keeps it as a prior (its sd and :data:`LENS_SD_FLOOR`
-    combined); with two more items ``(up (3,) camera frame, sd degrees)`` (or Nones) the floor's normal found
-    with it, kept as a prior too (sd at least :data:`FLOOR_SD_FLOOR_DEG`). Returns a dict with
+    actor's outline on every frame; ``lens`` (optional) a focal length found before (``calibrate.vanishing_points``;
+    ignored when it holds none): without ``p.focal_px`` the solve starts there and keeps it as a prior (its sd and
+    :data:`LENS_SD_FLOOR` combined), and the floor's normal found with it (``up_cam``) as a prior too (sd at least
+    :data:`FLOOR_SD_FLOOR_DEG`). Returns a dict with
     ``joints`` (n, 16, 3) world metres, ``camera`` (:class:`Camera`), ``sides`` (n, 16) int8, ``report``.
 
     BLAS runs on one thread meanwhile: the solver's matrices are small (33 x 33 frame blocks, a band of 99),
@@ -498,15 +498,16 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
         starts, focal_prior = [float(p.focal_px)], (float(p.focal_px), 1e-4)
         report["focal_source"] = "given"
         q, estimated = p, False
-    elif lens is not None:
+    elif lens is not None and lens.focal_px is not None:
         # a focal length from the room (calibrate.vanishing_points): one start there, kept as a prior; the take
         # alone leaves the focal length 7-60 % open (bench/focal_profile.py), the room's lines fix it to a few %
-        sd = float(np.hypot(lens[1], LENS_SD_FLOOR))
-        if len(lens) > 2 and lens[2] is not None and FLOOR_PRIOR:  # and the floor's normal, when the lines lie on it
-            floor_prior = (np.asarray(lens[2], dtype=np.float64), np.radians(max(float(lens[3]), FLOOR_SD_FLOOR_DEG)))
+        f_room, sd_room = float(lens.focal_px), float(lens.focal_sd_pct or 0.0) / 100.0
+        if lens.up_cam is not None:  # and the floor's normal, when the lines lie on it
+            floor_prior = (np.asarray(lens.up_cam, dtype=np.float64),
+                           np.radians(max(float(lens.up_sd_deg or 0.0), FLOOR_SD_FLOOR_DEG)))
             report["floor_source"] = "room lines"
-        starts, focal_prior = [float(lens[0])], (float(lens[0]), sd)
-        report["focal_source"] = f"room lines {lens[0]:.0f} px ± {100 * lens[1]:.1f} %, refined by the take"
+        starts, focal_prior = [f_room], (f_room, float(np.hypot(sd_room, LENS_SD_FLOOR)))
+        report["focal_source"] = f"room lines {f_room:.0f} px ± {100 * sd_room:.1f} %, refined by the take"
         q, estimated = p, False  # solved as with a given focal length, which the prior lets move by a few %
     else:
         # weak prior: lenses of ordinary cameras have f ~ 0.8-1.9 x the image width (log-normal around 1.2 W)
@@ -619,11 +620,12 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
         bone_lengths_m={k: round(v, 4) for k, v in lengths_to_body(prob.lengths_of(prob.globals_of(x))).items()},
     )
     # a second start ending at a clearly different focal length at a similar cost: the take cannot tell them apart
-    rivals = [fe for f0, fe, c in sweep if abs(np.log(fe / f)) > np.log(1.1) and c < (1 + RIVAL_COST) * min(c2 for _, _, c2 in sweep)]
+    # the focal lengths the starts and cross seeds found about as cheap as the cheapest: how far the take leaves the
+    # focal length open (the Jacobian's focal_sd_pct is the curvature at one minimum and understates it)
+    cheapest = min(c for _, _, c in sweep)
+    near = [f] + [fe for _, fe, c in sweep if c < (1 + RIVAL_COST) * cheapest]
+    rivals = [fe for fe in near[1:] if abs(np.log(fe / f)) > np.log(1.1)]
     if estimated and len(starts) > 1:
-        # the focal lengths the starts and cross seeds found about as cheap as the cheapest: how far the take leaves
-        # the focal length open (the Jacobian's focal_sd_pct is the curvature at one minimum and understates it)
-        near = [f] + [fe for _, fe, c in sweep if c < (1 + RIVAL_COST) * min(c2 for _, _, c2 in sweep)]
         report["focal_fits_px_min"], report["focal_fits_px_max"] = round(min(near), 1), round(max(near), 1)
     if rivals:
         report["focal_rivals_px"] = [round(r, 1) for r in rivals]
@@ -683,14 +685,12 @@ def solve_take(ctx, tracks, body, silhouette=None, lens=None):
         ctx.warn("confidence_power is set but the tracks carry no confidence: every tracked point weighs the same "
                  "(detectors such as detect.mediapipe_pose give one; suit trackers do not)")
     sil = None if silhouette is None else silhouette_field(silhouette, tr.n_frames)
-    prior = None
     if lens is not None and lens.focal_px is not None and p.focal_px is None:
         if (lens.width, lens.height) != (tr.width, tr.height):
             raise NodeError(f"the lens estimate is for {lens.width}x{lens.height} px images, the tracks are "
                             f"{tr.width}x{tr.height}", hint="connect the lens found on the same video as the tracks")
-        prior = (float(lens.focal_px), float(lens.focal_sd_pct or 0.0) / 100.0, lens.up_cam, lens.up_sd_deg)
     out = solve_take_arrays(tr.points, tr.tracked, lengths, tr.width, tr.height, float(tr.fps), p,
-                            progress=ctx.progress, confidence=confidence, silhouette=sil, lens=prior)
+                            progress=ctx.progress, confidence=confidence, silhouette=sil, lens=lens)
     rep = out["report"]
     ctx.log(f"focal {rep['focal_px']:.0f} px (± {rep['focal_sd_pct']:.1f} %), camera {rep['camera_height_m']:.2f} m high, "
             f"{rep['camera_distance_m']:.2f} m away, tilt {rep['camera_tilt_deg']:.1f}°; {rep['solve_seconds']:.1f} s")
