@@ -210,21 +210,22 @@ def test_solver_on_the_sample_tracks_given_the_focal_length(truth, tmp_path):
     pts = joints2d.copy()
     pts[:, [i for i in range(16) if i != 3]] = patch2d  # every joint but the head has a patch
     tracked = np.ones(pts.shape[:2], bool)
+    # sigma_px 1: these points have no tracking noise (the default, 2 px, is for real tracks: noise plus the patch
+    # model's error; on these noise-free points it leans on the priors more than they deserve, 71.5 mm, camera 1.566 m)
     out = solve_take_arrays(pts[::2], tracked[::2], truth["bone_lengths"], 640, 480, float(truth["fps"]) / 2,
-                            SolveTakeParams(focal_px=700.0))
+                            SolveTakeParams(focal_px=700.0, sigma_px=1.0))
     from tbha_graph.mocap.evaluate.measures import align_clip
 
     gt = truth["joints3d_world"][::2]
     aligned, _ = align_clip(out["joints"], gt, "rigid")
     seq = np.linalg.norm(aligned - gt, axis=-1).mean() * 1000
     assert seq < SAMPLE_SEQ_BOUND_MM
-    # measured 1.491 m (the same solve on every frame, not every other one: 1.313 m; the floor's height comes
-    # from the planted ankles and is weakly fixed)
-    assert abs(out["report"]["camera_height_m"] - 1.45) < 0.062
+    # measured 1.478 m (the floor's height comes from the planted ankles and is weakly fixed without a silhouette)
+    assert abs(out["report"]["camera_height_m"] - 1.45) < 0.042
     assert out["joints"][:, [12, 15], 1].min() > 0.08 - 0.003  # measured 0.5 mm below its resting height at worst
 
 
-SAMPLE_SEQ_BOUND_MM = 72.0  # measured 53.6 mm
+SAMPLE_SEQ_BOUND_MM = 72.0  # measured 53.0 mm (sigma_px 1)
 
 
 def test_long_take_in_windows_matches_the_whole_take_solve(truth):
