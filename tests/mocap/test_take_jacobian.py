@@ -11,7 +11,7 @@ import numpy as np
 
 from tbha_graph.mocap.reconstruct.solve_take import contacts_from_image, rest_pair_distances
 from tbha_graph.mocap.reconstruct.take_jacobian import joint_jacobian, residual_jacobian
-from tbha_graph.mocap.reconstruct.take_model import (DEFAULT_POINT_OFFSETS, HINGES, N_COVER, N_FRAME_RES, N_SIL, PER_FRAME,
+from tbha_graph.mocap.reconstruct.take_model import (DEFAULT_POINT_OFFSETS, HINGES, N_COVER, N_FRAME_RES, N_HANG, N_SIL, PER_FRAME,
                                                      TORSO_PAIRS, SilhouetteField, TakeData, TakeProblem, Weights,
                                                      bone_directions, pack_initial, point_positions)
 from tbha_graph.mocap.segment.silhouette import distance_outside
@@ -22,7 +22,8 @@ KINDS = {"reprojection": slice(0, 32), "torso": slice(32, 32 + len(TORSO_PAIRS))
          "head": slice(51, 54), "twist": slice(54, 57), "silhouette": slice(N_FRAME_RES, N_FRAME_RES + N_SIL - 4),
          "support": slice(N_FRAME_RES + N_SIL - 4, N_FRAME_RES + N_SIL - 3), "away": slice(N_FRAME_RES + N_SIL - 3, N_FRAME_RES + N_SIL - 1),
          "bottom": slice(N_FRAME_RES + N_SIL - 1, N_FRAME_RES + N_SIL), "cover": slice(N_FRAME_RES + N_SIL, N_FRAME_RES + N_SIL + N_COVER),
-         "upright": slice(N_FRAME_RES + N_SIL + N_COVER, N_FRAME_RES + N_SIL + N_COVER + 1)}
+         "upright": slice(N_FRAME_RES + N_SIL + N_COVER, N_FRAME_RES + N_SIL + N_COVER + 1),
+         "hang": slice(N_FRAME_RES + N_SIL + N_COVER + 1, N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG)}
 
 
 def thin_silhouettes(uv: np.ndarray, scale: float = 0.5, shape=(240, 320), ghost: float = 0.0, width: int = 1) -> SilhouetteField:
@@ -70,14 +71,15 @@ def test_analytic_frame_jacobian_equals_central_differences():
     nf, d = R[:, 1], float(-R[:, 1] @ t)
     data = TakeData(uv, weight, L, centre, fps, 0.08, contact, rest_pair_distances(L, 0.08),
                     silhouette=thin_silhouettes(joints_uv, ghost=60.0), away=np.arange(n) % 2 == 0, up=-nf)
-    prob = TakeProblem(data, bone_directions(P), nf, Weights(sigma_twist=0.2, support_band=-0.03, upright_sin=0.15),
+    prob = TakeProblem(data, bone_directions(P), nf, Weights(sigma_twist=0.2, support_band=-0.03, upright_sin=0.15,
+                                                          sigma_hang=0.5),
                        DEFAULT_POINT_OFFSETS.copy(), free_offsets=False)
     g = np.array([np.log(700.0), 0.0, 0.0, d - 0.04])  # the floor 4 cm up: some ankles below it
     fr = pack_initial(P, prob.ref).reshape(n, PER_FRAME)
     fr[:, 3:] += rng.normal(scale=0.35, size=(n, PER_FRAME - 3))  # bones turned ~20 degrees: hinges bent wrongly
     h = 1e-6
     F = prob.n_frame_res
-    assert F == N_FRAME_RES + N_SIL + N_COVER + 1
+    assert F == N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG
     num = np.empty((n, F, PER_FRAME))
     for i in range(PER_FRAME):
         fp, fm = fr.copy(), fr.copy()
@@ -97,6 +99,8 @@ def test_analytic_frame_jacobian_equals_central_differences():
     assert (bottom > 0).mean() > 0.3 and not bottom[::4].any()  # measured 0.43
     upright = prob.frame_terms(Pj, g)[:, KINDS["upright"]]
     assert (upright[::2] > 0).mean() > 0.6 and not upright[1::2].any()  # measured 0.93; only where flagged away
+    hang = prob.frame_terms(Pj, g)[:, KINDS["hang"]]
+    assert (np.abs(hang[::2]).sum(axis=1) > 0).all() and not hang[1::2].any()  # only where flagged away
     cover = prob.frame_terms(Pj, g)[:, KINDS["cover"]]
     assert not cover[weight[:, 1] > 0].any()  # only where the torso is not seen
     assert (cover[1::4] > 0).mean() > 0.22 and (cover > prob.w.robust_scale).any()  # measured 0.33, some beyond the soft-L1 scale

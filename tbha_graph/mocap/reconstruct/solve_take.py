@@ -134,6 +134,11 @@ class SolveTakeParams(BaseModel):
     free_offsets: bool = Field(False, description="estimate where each tracked point sits on the body (else the suit defaults)")
     free_lengths: bool = Field(False, description="refine the bone lengths from the take around the body's (3 % prior); measured on the sample: no better, so off")
     side_search: bool = Field(True, description="re-decide limbs' depth sides over time segments by total cost")
+    sigma_hang: float | None = Field(1.0, gt=0, description="with a silhouette, on frames where only the head is tracked "
+                                     "(the actor's back to the camera): each limb bone kept near straight down with this sd "
+                                     "(unit vectors; None: off). No limb patch is seen there and the outline alone let the "
+                                     "limbs flail (131_01 left/right: 200-330 mm off their root). 16 renders' mean "
+                                     "seq-MPJPE (bench/solver_sweep.py): off 124.6, 0.3 122.0, 0.5 120.6, 1 112.7, 2 118.7 mm")
     select_sigma_px: float = Field(1.0, gt=0, description="tracking sd while the focal length is chosen from the take alone "
                                    "(no room lines, no focal_px): the choice leans on the fit; measured on 16 renders at 2 px "
                                    "the four solver takes' mean went 87.6 -> 150.8 mm", json_schema_extra={"unit": "px"})
@@ -338,7 +343,7 @@ def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: Solve
                     rest_pair_distances(lengths, p.ankle_height), silhouette=silhouette,
                     away=None if silhouette is None else facing_away(weight), up=nf)
     w = Weights(sigma_px=p.sigma_px, sigma_acc=p.sigma_acc, sigma_twist=p.sigma_twist, sigma_acc_torso=p.sigma_acc_torso,
-                sigma_sil=p.sigma_sil)
+                sigma_sil=p.sigma_sil, sigma_hang=p.sigma_hang)
     offsets = point_offsets_of(p)
     return TakeProblem(data, bone_directions(P), nf, w, offsets, fixed_globals=held_globals, free_offsets=free_offsets,
                        focal_prior=focal_prior, free_lengths=p.free_lengths, floor_prior=floor_prior), d

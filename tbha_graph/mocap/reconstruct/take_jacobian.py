@@ -21,7 +21,7 @@ from ..skeleton import N_JOINTS, PARENTS
 from .take_model import (ANKLES, AXIS_TRIPLES, HINGES, J, N_BONES, N_COVER, N_FRAME_RES, N_SIL, PELVIS_JOINTS, PELVIS_SIDE,
                          PER_FRAME, SIL_PAIRS, THORAX_JOINTS, TORSO_PAIRS, TakeProblem, bottom_residual, cover_residuals,
                          cover_segments, robust_slope, sil_residuals, torso_unseen, unit, unseen_points,
-                         upright_residual)
+                         upright_residual, hang_residual, HANG_BONES)
 
 _EYE = np.eye(3)
 
@@ -178,6 +178,13 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
         du = (gh[:, None, :] @ U)[:, 0]
         out[:, row, J["neck"]] += du
         out[:, row, J["hips"]] -= du
+        row += 1  # the limbs hanging on head-only frames: d unit(P_b - P_a) = U (dP_b - dP_a)
+        _, on = hang_residual(P, d.subset(rows), w)
+        if on.any():
+            for k, b in enumerate(HANG_BONES):
+                U = unit_jacobian(P[:, b] - P[:, PARENTS[b]])[1] * (on / w.sigma_hang)[:, None, None]
+                out[:, row + 3 * k:row + 3 * k + 3, b] += U
+                out[:, row + 3 * k:row + 3 * k + 3, PARENTS[b]] -= U
         if parts is not None:
             parts["bottom"] = np.concatenate([bot["dr_dS"], bot["dlogf"][:, None], bot["A"]], axis=1)
             parts["sil_dlogf"] = sil["dlogf"]

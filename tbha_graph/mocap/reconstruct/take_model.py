@@ -20,7 +20,8 @@ above the floor, no ankle goes below it) and a weak prior of the point offsets a
 actor's silhouette (:class:`SilhouetteField`), the joints inside it (:func:`sil_residuals`), the feet on its lowest
 row (:func:`bottom_residual`), the torso facing away and upright (:func:`upright_residual`) where only the head
 is tracked, and the model covering its
-outline where the torso is not seen (:func:`cover_residuals`).
+outline where the torso is not seen (:func:`cover_residuals`); there too, optionally, the limbs hanging
+(:func:`hang_residual`).
 """
 from __future__ import annotations
 
@@ -207,6 +208,9 @@ class Weights:
     #                                (the toe, nearer the camera than the ankle, is lower in the image: 3-9 px on the renders)
     sigma_upright: float = 0.1   # with a silhouette, on frames flagged ``away``: the spine (hips -> neck) tilted from the
     upright_sin: float = 0.34    # vertical by more than asin(this) (20 degrees) costs ((sin(tilt) - this) / sigma_upright)²
+    sigma_hang: float | None = None  # with a silhouette, on frames flagged ``away``: each limb bone's direction minus straight
+    #                              down, over this (unit vectors), costs its square: the limbs' patches are unseen there and the
+    #                              outline alone let them flail (None: off)
     sigma_cover: float = 4.0     # with a silhouette: a sample of the outline farther from every projected bone than
     cover_tolerance: float = 0.06  # this fraction of the outline's height (about 0.1 m: the body's half thickness)
     #                                costs (excess px / sigma_cover)², soft-L1 beyond robust_scale (the model covers the outline)
@@ -440,6 +444,26 @@ def upright_residual(P: np.ndarray, d: TakeData, w: "Weights"):
     return np.where(on, s - w.upright_sin, 0.0) / w.sigma_upright, {"h": h, "s": s, "on": on, "up": up}
 
 
+#: Limb bones (by child joint) the hang prior (:func:`hang_residual`) pulls towards straight down.
+HANG_BONES = np.array([J[n] for n in ("left_elbow", "left_wrist", "right_elbow", "right_wrist",
+                                      "left_knee", "left_ankle", "right_knee", "right_ankle")])
+N_HANG = 3 * len(HANG_BONES)
+
+
+def hang_residual(P: np.ndarray, d: TakeData, w: "Weights") -> tuple[np.ndarray, np.ndarray]:
+    """The limbs hanging on the frames ``d.away`` (only the head tracked) ``(n, N_HANG)``: ``(unit(P_b - P_parent)
+    + up) / sigma_hang`` for each bone of :data:`HANG_BONES` (0 elsewhere, without ``d.up`` or ``sigma_hang``): with
+    the actor's back to the camera no limb patch is seen and the outline alone does not place the limbs. Returns the
+    residuals and the active mask ``(n,)``."""
+    n = P.shape[0]
+    on = np.zeros(n, bool) if (d.away is None or d.up is None or w.sigma_hang is None) else np.asarray(d.away, bool)
+    if not on.any():
+        return np.zeros((n, N_HANG)), on
+    up = unit(np.asarray(d.up, dtype=np.float64))
+    u = unit(P[:, HANG_BONES] - P[:, PARENTS[HANG_BONES]])
+    return ((u + up) * (on / w.sigma_hang)[:, None, None]).reshape(n, N_HANG), on
+
+
 def seat_on_outline(P: np.ndarray, f: float, centre: np.ndarray, nf: np.ndarray, dfl: float, sil: SilhouetteField,
                     frames: np.ndarray, lift_px: float = -1.0, scales: np.ndarray = np.geomspace(0.6, 1.8, 241)) -> np.ndarray:
     """A start for the frames where the image says little of the body: joints ``P`` ``(n, 16, 3)`` (camera frame)
@@ -518,7 +542,7 @@ class TakeProblem:
         # (up (3,) camera frame, sigma radians): the floor's normal as the room's lines show it
         self.floor_prior = None if floor_prior is None else (unit(np.asarray(floor_prior[0], dtype=np.float64)), float(floor_prior[1]))
         self.n_glob = 0 if fixed_globals is not None else self.layout.n_globals
-        self.n_frame_res = N_FRAME_RES + (N_SIL + N_COVER + 1 if data.silhouette is not None else 0)
+        self.n_frame_res = N_FRAME_RES + (N_SIL + N_COVER + 1 + N_HANG if data.silhouette is not None else 0)
         self.set_refs(ref, n_ref)
 
     def set_refs(self, ref: np.ndarray, n_ref: np.ndarray) -> None:
@@ -601,7 +625,7 @@ class TakeProblem:
                       np.maximum(h.min(axis=-1, keepdims=True) - w.support_band, 0.0) / w.sigma_support,
                       np.stack(facing, axis=-1), bottom_residual(P, f, d.centre, nf, dfl, d.silhouette, w)[0][:, None],
                       cover_residuals(P, f, d.centre, d.silhouette, d.lengths, w, mask=torso_unseen(d.weight))[0],
-                      upright_residual(P, d, w)[0][:, None]]
+                      upright_residual(P, d, w)[0][:, None], hang_residual(P, d, w)[0]]
         return np.concatenate(terms, axis=-1)
 
     def slide_vectors(self, P: np.ndarray, nf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -658,9 +682,9 @@ class TakeProblem:
         F = self.frame_terms(P, g)
         acc, slide = self.coupled_terms(P, self.floor(g)[0])
         sil = self.n_frame_res - N_FRAME_RES
-        extra = [N_COVER, 1] if sil else [0, 0]  # the cover and upright terms end the silhouette's block
+        extra = [N_COVER, 1, N_HANG] if sil else [0, 0, 0]  # the cover, upright and hang terms end the silhouette's block
         k = np.cumsum([0, N_JOINTS * 2, len(TORSO_PAIRS), len(HINGES), 2, 2, 6, sil - sum(extra)] + extra)
-        names = ("reprojection", "torso", "hinge", "below_floor", "contact", "pose", "silhouette", "cover", "upright")
+        names = ("reprojection", "torso", "hinge", "below_floor", "contact", "pose", "silhouette", "cover", "upright", "hang")
         out = {nm: 0.5 * float(np.sum(F[:, k[i]:k[i + 1]] ** 2)) for i, nm in enumerate(names)}
         out.update(acceleration=0.5 * float(np.sum(acc ** 2)), slide=0.5 * float(np.sum(slide ** 2)),
                    priors=0.5 * float(np.sum(self.global_terms(g) ** 2)))
