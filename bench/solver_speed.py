@@ -1,11 +1,12 @@
 """Speed and memory of ``reconstruct.solve_take`` on the bundled sample's tracks and on a take 10x longer
 (the sample's tracks played forwards and backwards, so the motion stays continuous).
 
-Prints ``name=value`` lines: ``solver_ms_per_frame_sample``, ``solver_ms_per_frame_10x``, ``peak_mb_sample``,
-``peak_mb_10x`` (peak traced Python allocations during a second solve; the time is
-the first, untraced one's) and the frame counts, as the default pipeline solves (the focal length from the
-room's lines, ``calibrate.vanishing_points``: one start); ``solver_ms_per_frame_sample_take_alone`` and
-``_10x_take_alone`` without it (three starting focal lengths and their cross seeds).
+Prints ``name=value`` lines: ``solver_ms_per_frame_sample``, ``solver_ms_per_frame_10x`` (the median of 3 solves
+of the sample, 1 of the long take, after a first one), ``solver_first_solve_ms_per_frame_*`` (that first solve: the
+first in the process also pays one-time imports and first calls, about 0.8 s), ``peak_mb_sample``, ``peak_mb_10x``
+(peak traced Python allocations during one more solve) and the frame counts, as the default pipeline solves (the
+focal length from the room's lines, ``calibrate.vanishing_points``: one start); ``..._take_alone`` without it
+(three starting focal lengths and their cross seeds).
 
     python bench/solver_speed.py            # tracks from the default pipeline's cache (runs it once)
 """
@@ -36,20 +37,22 @@ def sample_tracks() -> tuple[dict, "LensEstimate | None"]:
     return {k: np.asarray(v) for k, v in tr.items()}, (lens if lens.focal_px is not None else None)
 
 
-def timed(points, tracked, width, height, fps, lens) -> tuple[float, float]:
-    """Wall seconds of one solve (untraced: tracing allocations slows numpy code about 1.7x) and the peak traced
-    allocations of a second, identical solve (MB)."""
+def timed(points, tracked, width, height, fps, lens, repeats: int = 3) -> tuple[float, float, float]:
+    """Wall seconds of the first solve (untraced; the first in the process also pays the one-time imports and
+    first calls: about 0.8 s on the sample), the median of ``repeats`` more (the per-frame cost proper), and the
+    peak traced allocations of one more, identical solve (MB; tracing slows numpy code about 1.7x)."""
     def solve():
+        t0 = time.perf_counter()
         solve_take_arrays(points, tracked, body_lengths(None), width, height, fps, SolveTakeParams(), lens=lens)
+        return time.perf_counter() - t0
 
-    t0 = time.perf_counter()
-    solve()
-    dt = time.perf_counter() - t0
+    first = solve()
+    median = float(np.median([solve() for _ in range(repeats)]))
     tracemalloc.start()
     solve()
     peak = tracemalloc.get_traced_memory()[1] / 1e6
     tracemalloc.stop()
-    return dt, peak
+    return first, median, peak
 
 
 def main() -> None:
@@ -63,12 +66,11 @@ def main() -> None:
     print(f"frames_10x={len(long_pts)}")
     print(f"room_focal_px={lens.focal_px if lens else None}")
     for suffix, prior in (("", lens), ("_take_alone", None)):
-        dt, peak = timed(pts, trk, w, h, fps, prior)
-        print(f"solver_ms_per_frame_sample{suffix}={1000 * dt / len(pts):.1f}")
-        print(f"peak_mb_sample{suffix}={peak:.1f}")
-        dt, peak = timed(long_pts, long_trk, w, h, fps, prior)
-        print(f"solver_ms_per_frame_10x{suffix}={1000 * dt / len(long_pts):.1f}")
-        print(f"peak_mb_10x{suffix}={peak:.1f}", flush=True)
+        for name, p, t in (("sample", pts, trk), ("10x", long_pts, long_trk)):
+            first, dt, peak = timed(p, t, w, h, fps, prior, repeats=3 if name == "sample" else 1)
+            print(f"solver_ms_per_frame_{name}{suffix}={1000 * dt / len(p):.1f}")
+            print(f"solver_first_solve_ms_per_frame_{name}{suffix}={1000 * first / len(p):.1f}")
+            print(f"peak_mb_{name}{suffix}={peak:.1f}", flush=True)
 
 
 if __name__ == "__main__":
