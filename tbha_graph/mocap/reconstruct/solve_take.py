@@ -279,8 +279,6 @@ TURN_SEARCH = True
 #: different focal length (over 10 %), makes the focal length "ambiguous" (a warning)
 RIVAL_COST = 0.15
 
-COMPARED_TERMS = ("reprojection", "torso", "hinge", "below_floor", "acceleration", "contact", "slide", "pose", "priors")
-
 
 def globals_vector(f: float, d: float, free_offsets: bool, free_lengths: bool = False,
                    length_updates: np.ndarray | None = None) -> np.ndarray:

@@ -18,10 +18,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..skeleton import N_JOINTS, PARENTS
-from .take_model import (ANKLES, AXIS_TRIPLES, HINGES, J, N_BONES, N_COVER, N_FRAME_RES, N_SIL, PELVIS_JOINTS, PELVIS_SIDE,
-                         PER_FRAME, SIL_PAIRS, THORAX_JOINTS, TORSO_PAIRS, TakeProblem, bottom_residual, cover_residuals,
-                         cover_segments, robust_slope, sil_residuals, torso_unseen, unit, unseen_points,
-                         upright_residual, hang_residual, HANG_BONES)
+from .take_model import (ANKLES, AXIS_TRIPLES, HANG_BONES, HINGES, J, N_BONES, N_COVER, N_FRAME_RES, N_SIL, PELVIS_JOINTS,
+                         PELVIS_SIDE, PER_FRAME, SIL_PAIRS, THORAX_JOINTS, TORSO_PAIRS, TakeProblem, bottom_residual,
+                         cover_residuals, cover_segments, hang_residual, robust_slope, sil_residuals, torso_unseen, unit,
+                         unseen_points, upright_residual)
 
 _EYE = np.eye(3)
 

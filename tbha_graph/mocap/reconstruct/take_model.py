@@ -513,7 +513,8 @@ class Layout:
 
 #: Residuals per frame that depend on that frame alone: reprojection (16 x 2), torso distances, hinges,
 #: ankle below the floor (2), planted ankle off the floor (2), pose prior (head along the neck, 3; pelvis
-#: facing where the thorax faces, 3); with a silhouette, :data:`N_SIL` more (:attr:`TakeProblem.n_frame_res`).
+#: facing where the thorax faces, 3); with a silhouette, :data:`N_SIL` + :data:`N_COVER` + 1 + :data:`N_HANG` more
+#: (:attr:`TakeProblem.n_frame_res`).
 N_FRAME_RES = N_JOINTS * 2 + len(TORSO_PAIRS) + len(HINGES) + 4 + 6
 
 
@@ -524,8 +525,9 @@ class TakeProblem:
     :data:`PER_FRAME` values. Bone directions are tangent updates around ``ref`` ``(n, 15, 3)`` and the floor
     normal around ``n_ref`` ``(3,)``; :meth:`recentre` moves both references to the current solution.
 
-    Residual vector: per-frame block ``(n, n_frame_res)`` (frame-major; :data:`N_FRAME_RES`, plus :data:`N_SIL`
-    silhouette residuals at its end when the data has a silhouette), then accelerations
+    Residual vector: per-frame block ``(n, n_frame_res)`` (frame-major; :data:`N_FRAME_RES`, plus the silhouette's
+    :data:`N_SIL`, the cover's :data:`N_COVER`, the upright spine's 1 and the hanging limbs' :data:`N_HANG` at its
+    end when the data has a silhouette), then accelerations
     ``(n - 2, 16 * 3)``, planted-ankle slides ``(n, 2)``, then global priors (point offsets, a known focal).
     """
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..skeleton import N_JOINTS, PARENTS
 from .take_jacobian import global_jacobian, joint_jacobian, length_jacobian, residual_jacobian
-from .take_model import (ANKLES, J, N_BONES, PER_FRAME, TakeData, TakeProblem, bone_directions,
+from .take_model import (ANKLES, J, N_BONES, PER_FRAME, TakeProblem, bone_directions,
                          pack_initial, unit)
 
 #: Frames per chunk of the residuals-by-joints Jacobian in :func:`normal_equations` (bounds its memory)
