@@ -243,16 +243,21 @@ def true_camera_seq_mpjpe(sets: dict, vars: dict, truth: dict) -> float:
     return float(np.nanmean(m.joint_distances(aligned, gt))) * 1000.0
 
 
+def take_config(take: str, suit: str) -> tuple[dict, dict]:
+    """``(sets, vars)`` of ``pipelines/evaluate_render.yaml`` rendering ``take`` (of :data:`TAKES` or
+    :data:`HELD_OUT`) in ``suit`` (of :data:`SUITS`)."""
+    clip, lead = {**TAKES, **HELD_OUT}[take]
+    sets = {(k if "." in k else f"lead_in.{k}"): v for k, v in lead.items()}
+    sets["colors.suit"] = sets["render.suit"] = str(SUITS[suit])
+    return sets, {"bvh": str(ROOT / "data" / "mocap" / "cmu" / clip)}
+
+
 def run_take(take: str, suit: str, keep: Path | None) -> dict:
     from tbha_graph.core.runner import load_graph, run_graph
     from tbha_graph.mocap.evaluate import measures as m
     from tbha_graph.mocap.suit import load_suit
 
-    clip, lead = {**TAKES, **HELD_OUT}[take]
-    sets = {(k if "." in k else f"lead_in.{k}"): v for k, v in lead.items()}
-    sets["colors.suit"] = str(SUITS[suit])
-    sets["render.suit"] = str(SUITS[suit])
-    vars = {"bvh": str(ROOT / "data" / "mocap" / "cmu" / clip)}
+    sets, vars = take_config(take, suit)
     graph = load_graph(ROOT / "pipelines" / "evaluate_render.yaml", sets=sets, vars=vars)
     out = None if keep is None else keep / f"{take}-{suit}"
     outputs = ["metrics.json"] if keep is None else None

@@ -28,6 +28,20 @@ TAKES = (
 )
 
 
+def render_graph(take: tuple, focal_given: bool = False):
+    """The default pipeline's graph on a render of ``take`` (an entry of :data:`TAKES`), the render's focal length
+    given to the solver when ``focal_given``: one definition for the bench's sibling scripts and the tests."""
+    from tbha_graph.core.runner import load_graph
+
+    _, clip, seconds, eye, target, f = take
+    vars = {"bvh": str(ROOT / "data" / "mocap" / "cmu" / clip)}
+    if focal_given:
+        vars["focal_px"] = f
+    return load_graph(ROOT / "pipelines" / "evaluate_render.yaml", vars=vars,
+                      sets={"lead_in.duration": seconds, "camera.eye": list(eye), "camera.target": list(target),
+                            "camera.focal_px": f})
+
+
 def main() -> None:
     given = "--focal-given" in sys.argv
     sets = [a for i, a in enumerate(sys.argv) if i > 0 and sys.argv[i - 1] == "--set"]

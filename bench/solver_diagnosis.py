@@ -31,9 +31,10 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
 from solver_accuracy import TAKES  # noqa: E402
+from solver_sweep import take_graph  # noqa: E402
 
 from tbha_graph.core.cache import Cache  # noqa: E402
-from tbha_graph.core.runner import load_graph, run_graph  # noqa: E402
+from tbha_graph.core.runner import run_graph  # noqa: E402
 from tbha_graph.mocap.body import body_lengths  # noqa: E402
 from tbha_graph.mocap.bundles.tracks import read_tracks  # noqa: E402
 from tbha_graph.mocap.evaluate.measures import align_clip  # noqa: E402
@@ -45,16 +46,7 @@ GRID_SCALES = (0.9, 0.95, 1.0, 1.05, 1.1)
 def capture_inputs(take: str) -> tuple[dict, dict | None, dict]:
     """Tracks, silhouette and ground truth of ``take`` ("sample" or a name of ``solver_accuracy.TAKES``), from
     the default pipeline's nodes (cached in the user cache, so a second run only solves)."""
-    if take == "sample":
-        graph = load_graph(ROOT / "pipelines" / "default.yaml")
-        truth_ref = "truth.truth"
-    else:
-        _, clip, seconds, eye, target, f = next(t for t in TAKES if t[0] == take)
-        graph = load_graph(ROOT / "pipelines" / "evaluate_render.yaml",
-                           vars={"bvh": str(ROOT / "data" / "mocap" / "cmu" / clip)},
-                           sets={"lead_in.duration": seconds, "camera.eye": list(eye), "camera.target": list(target),
-                                 "camera.focal_px": f})
-        truth_ref = "render.ground_truth"
+    graph, truth_ref = take_graph(take)
     run = run_graph(graph, outputs=["track", "silhouette", truth_ref.split(".")[0]],
                     cache=Cache(Path.home() / ".cache" / "tbha-graph"))
     return run.output("track.tracks"), run.output("silhouette.silhouette"), run.output(truth_ref)

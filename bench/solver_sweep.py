@@ -29,7 +29,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
 import labelling  # noqa: E402  (the turning takes, one definition)
-from solver_accuracy import TAKES as SOLVER_TAKES  # noqa: E402
+from solver_accuracy import TAKES as SOLVER_TAKES, render_graph  # noqa: E402
 
 from tbha_graph.core.cache import Cache  # noqa: E402
 from tbha_graph.core.runner import load_graph, run_graph  # noqa: E402
@@ -43,27 +43,21 @@ TURNING = [(take, suit) for take in list(labelling.TAKES) + list(labelling.HELD_
 
 def take_graph(take):
     """The default pipeline's graph for ``take`` (``"sample"``, a solver render's name, or a ``(take, suit)``
-    turning take) and the node holding its ground truth."""
+    turning take) and the output holding its ground truth."""
     if take == "sample":
-        return load_graph(ROOT / "pipelines" / "default.yaml"), "truth"
-    mocap = ROOT / "data" / "mocap" / "cmu"
+        return load_graph(ROOT / "pipelines" / "default.yaml"), "truth.truth"
     if isinstance(take, str):
-        _, clip, seconds, eye, target, f = next(t for t in SOLVER_TAKES if t[0] == take)
-        sets = {"lead_in.duration": seconds, "camera.eye": list(eye), "camera.target": list(target), "camera.focal_px": f}
-    else:
-        name, suit = take
-        clip, lead = {**labelling.TAKES, **labelling.HELD_OUT}[name]
-        sets = {(k if "." in k else f"lead_in.{k}"): v for k, v in lead.items()}
-        sets["colors.suit"] = sets["render.suit"] = str(labelling.SUITS[suit])
-    return load_graph(ROOT / "pipelines" / "evaluate_render.yaml", sets=sets, vars={"bvh": str(mocap / clip)}), "render"
+        return render_graph(next(t for t in SOLVER_TAKES if t[0] == take)), "render.ground_truth"
+    sets, vars = labelling.take_config(*take)
+    return load_graph(ROOT / "pipelines" / "evaluate_render.yaml", sets=sets, vars=vars), "render.ground_truth"
 
 
 def solve(take, params: dict, focal: str, cache: Cache) -> float:
     """Seq-MPJPE (mm) of the solver on ``take`` with ``SolveTakeParams(**params)``; ``focal``: ``room`` (the
     ``lens`` node's estimate, as the default pipeline), ``given`` (the truth's) or ``take`` (no lens)."""
-    graph, truth_node = take_graph(take)
-    run = run_graph(graph, outputs=["track", "silhouette", "lens", truth_node], cache=cache)
-    truth = run.output(f"{truth_node}.truth" if truth_node == "truth" else "render.ground_truth")
+    graph, truth_ref = take_graph(take)
+    run = run_graph(graph, outputs=["track", "silhouette", "lens", truth_ref.split(".")[0]], cache=cache)
+    truth = run.output(truth_ref)
     tr = read_tracks(run.output("track.tracks"))
     n = tr.n_frames
     gt = np.asarray(truth["joints3d_world"])[:n]

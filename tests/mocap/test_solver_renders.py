@@ -15,11 +15,11 @@ from pathlib import Path
 import pytest
 
 from tbha_graph.core.cache import Cache
-from tbha_graph.core.runner import load_graph, run_graph
+from tbha_graph.core.runner import run_graph
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "bench"))
-from solver_accuracy import TAKES  # noqa: E402  (one definition of the takes, shared with the bench)
+from solver_accuracy import TAKES, render_graph  # noqa: E402  (one definition of the takes, shared with the bench)
 
 #: take -> (mpjpe_mm, joint_angle_err_deg, floor_penetration_mm) bounds with the focal length given;
 #: measured 103.8 / 12.1 / 1.5, 44.2 / 6.3 / 0.6, 61.8 / 6.5 / 4.5 (sigma_px 2, sigma_hang 1)
@@ -36,14 +36,7 @@ def cache(tmp_path_factory):
 
 
 def capture(take, cache, focal_given: bool) -> dict:
-    name, clip, seconds, eye, target, f = take
-    vars = {"bvh": str(ROOT / "data" / "mocap" / "cmu" / clip)}
-    if focal_given:
-        vars["focal_px"] = f
-    g = load_graph(ROOT / "pipelines" / "evaluate_render.yaml", vars=vars,
-                   sets={"lead_in.duration": seconds, "camera.eye": list(eye), "camera.target": list(target),
-                         "camera.focal_px": f})
-    return run_graph(g, outputs=["metrics.json"], cache=cache).output("metrics.json")
+    return run_graph(render_graph(take, focal_given), outputs=["metrics.json"], cache=cache).output("metrics.json")
 
 
 @pytest.mark.parametrize("take", TAKES, ids=[t[0] for t in TAKES])
@@ -91,12 +84,8 @@ def test_limbs_hang_where_only_the_head_is_seen(cache):
     from tbha_graph.mocap.bundles.tracks import read_tracks
     from tbha_graph.mocap.reconstruct import solve_take as st
 
-    name, clip, seconds, eye, target, f = TAKES[0]
-    assert name == "walk131_01_f500_low"
-    g = load_graph(ROOT / "pipelines" / "evaluate_render.yaml", vars={"bvh": str(ROOT / "data" / "mocap" / "cmu" / clip)},
-                   sets={"lead_in.duration": seconds, "camera.eye": list(eye), "camera.target": list(target),
-                         "camera.focal_px": f})
-    run = run_graph(g, outputs=["track", "silhouette", "lens", "render"], cache=cache)
+    assert TAKES[0][0] == "walk131_01_f500_low"
+    run = run_graph(render_graph(TAKES[0]), outputs=["track", "silhouette", "lens", "render"], cache=cache)
     tr = read_tracks(run.output("track.tracks"))
     n = tr.n_frames
     truth = np.asarray(run.output("render.ground_truth")["joints3d_world"])[:n]

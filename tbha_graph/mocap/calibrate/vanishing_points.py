@@ -215,11 +215,9 @@ def estimate_focal(image: np.ndarray, p: VanishingParams) -> dict:
     for a in range(len(fams)):
         for b in range(a + 1, len(fams)):
             f = focal_from_pair(points[a], points[b], centre)
-            if f is None or not 0.3 * w <= f <= 8.0 * w:
+            support = min(length[fams[a]].sum(), length[fams[b]].sum())  # the weaker family's length
+            if f is None or not 0.3 * w <= f <= 8.0 * w or support < p.min_share * length.sum():
                 continue
-            if min(length[fams[a]].sum(), length[fams[b]].sum()) < p.min_share * length.sum():
-                continue
-            support = min(length[fams[a]].sum(), length[fams[b]].sum())
             if best is None or support > best[0]:
                 best = (support, a, b, f)
     if best is None:

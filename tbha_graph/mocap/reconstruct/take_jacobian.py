@@ -171,7 +171,8 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
         cov = _cover(prob, P, g, rows)
         out[:, row:row + N_COVER] = cov["dP"]
         row += N_COVER  # the spine upright on head-only frames: d|h| = (h/|h|)ᵀ (I - up upᵀ) U (dP_neck - dP_hips)
-        _, up = upright_residual(P, d.subset(rows), w)
+        dr = d.subset(rows)  # this chunk's data, for the upright and hang terms
+        _, up = upright_residual(P, dr, w)
         gh = up["h"] / np.maximum(up["s"], 1e-12)[:, None]
         gh = (gh - (gh @ up["up"])[:, None] * up["up"]) * (up["on"] / w.sigma_upright)[:, None]
         U = unit_jacobian(P[:, J["neck"]] - P[:, J["hips"]])[1]
@@ -179,7 +180,7 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
         out[:, row, J["neck"]] += du
         out[:, row, J["hips"]] -= du
         row += 1  # the limbs hanging on head-only frames: d unit(P_b - P_a) = U (dP_b - dP_a)
-        _, on = hang_residual(P, d.subset(rows), w)
+        _, on = hang_residual(P, dr, w)
         if on.any():
             for k, b in enumerate(HANG_BONES):
                 U = unit_jacobian(P[:, b] - P[:, PARENTS[b]])[1] * (on / w.sigma_hang)[:, None, None]
