@@ -88,6 +88,28 @@ def test_draw_overlay_filled_dots_for_tracked_hollow_for_lost(scene):
         assert near(frame[ring[1], ring[0]], style.TRACKS_BGR, 60)
 
 
+def test_lost_joint_drawn_where_the_3d_puts_it_never_at_an_off_body_prediction(scene):
+    """A lost joint's ring goes at the motion's reprojection, not at the tracker's prediction, and no track
+    bone reaches it (issue 13: a lost joint is never shown off the body)."""
+    tracks = dict(scene["tracks"], points=scene["tracks"]["points"].copy())
+    i = 3  # head lost
+    pts = scene["tracks"]["points"][i]
+    off = pts[HEAD] + np.array([60.0, -20.0])  # the tracker's prediction, off the body
+    tracks["points"][i, HEAD] = off
+    layers = OverlayLayers(N, scene["clip"], tracks, {"joints": scene["joints"], "fps": np.array(FPS)},
+                           scene["camera"].to_model(), None, True)
+    sizes = draw.Sizes(dot=8, line=2, font=0.4)
+    frame = draw_overlay(np.full((H, W, 3), BACKGROUND, np.uint8), i, layers, sizes)
+    ring = np.rint(pts[HEAD] + 8 * outward(pts, HEAD)).astype(int)  # on the reprojected head's ring
+    assert near(frame[ring[1], ring[0]], style.TRACKS_BGR, 60)
+    u, v = np.rint(off).astype(int)
+    patch = frame[v - 10:v + 11, u - 10:u + 11]
+    assert color_pixels(patch, style.TRACKS_BGR, 60) == 0  # nothing yellow where the tracker guessed
+    mid = np.rint((off + pts[sk.PARENTS[HEAD]]) / 2).astype(int)  # nor a bone towards it
+    assert color_pixels(frame[mid[1] - 2:mid[1] + 3, mid[0] - 2:mid[0] + 3], style.TRACKS_BGR, 60) == 0
+    assert "where the 3D puts it" in layers.legend()[1][1]
+
+
 def test_overlay_video_has_the_clip_frames_size_and_colours(scene, tmp_path):
     motion = {"joints": scene["joints"] + np.array([0.4, 0.0, 0.0]), "fps": np.array(FPS)}  # reprojection beside the tracks
     out = run_node(overlay, work_dir=tmp_path, params={"dot_radius": 6, "line_width": 2}, video=scene["clip"], tracks=scene["tracks"],

@@ -3,8 +3,9 @@
 Layers, bottom to top (colours in :mod:`tbha_graph.mocap.viz.style`):
 
 * the 3D motion reprojected with the camera (optional ``motion`` + ``camera``): magenta skeleton;
-* the 2D tracks: yellow skeleton; tracked joints as filled dots, lost joints (the tracker's
-  prediction) as hollow circles;
+* the 2D tracks: yellow bones between tracked joints, tracked joints as filled dots; a lost joint as a
+  hollow circle where the 3D motion puts it (its reprojection, when the motion is connected), else at the
+  tracker's prediction: what the tracker did not see is never drawn as if it had been;
 * ground truth (optional ``truth``): thin green crosses at the truth's ``joints2d`` (rescaled to the
   video size), wider than the dots so they show where the tracks are right;
 * a legend (top left) and a frame counter with the time (bottom left);
@@ -55,7 +56,8 @@ def _check_frames(n: int, array: np.ndarray, what: str, tail: tuple[int, ...]) -
 
 class OverlayLayers:
     """Everything drawn on the frames, checked once: ``points``/``tracked`` (n, 16, 2)/(n, 16) of the
-    tracks, optional ``reprojected`` (n, 16, 2) px and ``truth2d`` (n, 16, 2) px."""
+    tracks, optional ``reprojected`` (n, 16, 2) px and ``truth2d`` (n, 16, 2) px; ``lost_at`` (n, 16, 2) px
+    where each lost joint's ring goes (the reprojection where finite, else the tracker's prediction)."""
 
     def __init__(self, n: int, clip: VideoClip, tracks: dict, motion: dict | None, camera, truth: dict | None, draw_truth: bool):
         self.points = _check_frames(n, tracks["points"], "tracks 'points'", (N_JOINTS, 2)).astype(np.float64)
@@ -71,6 +73,9 @@ class OverlayLayers:
             with np.errstate(divide="ignore", invalid="ignore"):
                 proj = cam.project(joints)
             self.reprojected = np.where((cam.to_camera(joints)[..., 2] > 1e-9)[..., None], proj, np.nan)
+        self.lost_at = self.points
+        if self.reprojected is not None:
+            self.lost_at = np.where(np.isfinite(self.reprojected).all(-1, keepdims=True), self.reprojected, self.points)
         self.doubtful = None
         if "doubtful" in tracks and np.shape(tracks["doubtful"]) == (n,):
             self.doubtful = np.asarray(tracks["doubtful"], dtype=np.int64)
@@ -81,7 +86,8 @@ class OverlayLayers:
                 self.truth2d = _check_frames(n, gt, "ground truth 'joints2d'", (N_JOINTS, 2))
 
     def legend(self) -> list[tuple[str, str, tuple[int, int, int]]]:
-        entries = [("dot", "tracked joint", style.TRACKS_BGR), ("ring", "lost joint (predicted)", style.TRACKS_BGR)]
+        lost = "lost joint (where the 3D puts it)" if self.reprojected is not None else "lost joint (predicted)"
+        entries = [("dot", "tracked joint", style.TRACKS_BGR), ("ring", lost, style.TRACKS_BGR)]
         if self.reprojected is not None:
             entries.append(("line", "3D motion reprojected", style.REPROJECTED_BGR))
         if self.truth2d is not None:
@@ -94,8 +100,9 @@ def draw_overlay(frame: np.ndarray, i: int, layers: OverlayLayers, sizes: draw.S
     if layers.reprojected is not None:
         # wider than the tracks' bones: a magenta rim shows around them where 3D and 2D agree
         draw.draw_bones(frame, layers.reprojected[i], style.REPROJECTED_BGR, sizes.line + 2)
-    draw.draw_bones(frame, layers.points[i], style.TRACKS_BGR, sizes.line)
-    draw.draw_dots(frame, layers.points[i], layers.tracked[i], style.TRACKS_BGR, sizes.dot, sizes.line)
+    seen = layers.tracked[i]
+    draw.draw_bones(frame, np.where(seen[:, None], layers.points[i], np.nan), style.TRACKS_BGR, sizes.line)
+    draw.draw_dots(frame, np.where(seen[:, None], layers.points[i], layers.lost_at[i]), seen, style.TRACKS_BGR, sizes.dot, sizes.line)
     if layers.truth2d is not None:  # thin crosses on top, reaching beyond the dots: visible where the tracks are right
         draw.draw_markers(frame, layers.truth2d[i], style.TRUTH_BGR, 2 * sizes.dot + 8, 1)
     if layers.doubtful is not None and layers.doubtful[i]:
@@ -119,7 +126,7 @@ def draw_overlay(frame: np.ndarray, i: int, layers: OverlayLayers, sizes: draw.S
     params=OverlayParams,
 )
 def overlay(ctx, video, tracks, motion, camera, truth):
-    """Draw the 2D tracks (filled dots: tracked, hollow: lost), the reprojected 3D skeleton and the
+    """Draw the 2D tracks (filled dots: tracked; hollow: lost, where the 3D puts them), the reprojected 3D skeleton and the
     ground truth on the video, with a legend and frame counter; writes an H.264 mp4 (same size, fps
     and frame count as the input clip)."""
     p: OverlayParams = ctx.params
