@@ -10,10 +10,18 @@ later runs only solve, about 2 minutes per setting); the solve is ``solve_take_a
 Prints ``name=value`` lines: ``<take>_mpjpe_mm`` (one rigid alignment over the whole take, no scale), then
 ``solver4_mean_mm`` (the sample and the three solver renders), ``turning12_mean_mm`` and ``all16_mean_mm``.
 
+Even the mean over sixteen takes moves by ~15 mm with a change that should do nothing (``sigma_px`` 2.0 -> 1.98 or
+2.02: all16 112.7 -> 127.6 / 126.4 mm on 2026-11-26). ``--repeats K`` solves every take K times, the first on its
+tracks as they are and the others on the tracks plus Gaussian noise of ``--jitter-px`` (0.05 px: a tenth of the
+tracker's own error; seeds 1 .. K-1, the same for every setting), and prints the means over the repeats, each take's
+``_min``/``_max`` and each mean's ``_min``/``_max`` over the repeats (each repeat's own mean over the takes): a
+setting is better than another when its mean is, by more than their spreads.
+
     python bench/solver_sweep.py                                  # the default settings, the room's focal length
     python bench/solver_sweep.py --set sigma_px=1.0               # a SolveTakeParams field changed
     python bench/solver_sweep.py --focal given                    # the true focal length given (focal_px)
     python bench/solver_sweep.py --focal take                     # no room lines: the focal length from the take
+    python bench/solver_sweep.py --repeats 3                      # each take 3 times (twice with 0.05 px noise)
 """
 from __future__ import annotations
 
@@ -52,9 +60,11 @@ def take_graph(take):
     return load_graph(ROOT / "pipelines" / "evaluate_render.yaml", sets=sets, vars=vars), "render.ground_truth"
 
 
-def solve(take, params: dict, focal: str, cache: Cache) -> float:
-    """Seq-MPJPE (mm) of the solver on ``take`` with ``SolveTakeParams(**params)``; ``focal``: ``room`` (the
-    ``lens`` node's estimate, as the default pipeline), ``given`` (the truth's) or ``take`` (no lens)."""
+def solve(take, params: dict, focal: str, cache: Cache, repeats: int = 1, jitter_px: float = 0.05) -> list[float]:
+    """Seq-MPJPE (mm) of the solver on ``take`` with ``SolveTakeParams(**params)``, one per repeat (the first on
+    the tracks as they are, repeat r >= 1 on the tracked points plus Gaussian noise of ``jitter_px`` pixels, seed
+    r); ``focal``: ``room`` (the ``lens`` node's estimate, as the default pipeline), ``given`` (the truth's) or
+    ``take`` (no lens)."""
     graph, truth_ref = take_graph(take)
     run = run_graph(graph, outputs=["track", "silhouette", "lens", truth_ref.split(".")[0]], cache=cache)
     truth = run.output(truth_ref)
@@ -64,11 +74,18 @@ def solve(take, params: dict, focal: str, cache: Cache) -> float:
     p = dict(params)
     if focal == "given":
         p["focal_px"] = float(np.asarray(truth["K"])[0, 0])
-    res = st.solve_take_arrays(tr.points, tr.tracked, body_lengths(None), tr.width, tr.height, float(tr.fps),
-                               st.SolveTakeParams(**p), silhouette=st.silhouette_field(run.output("silhouette.silhouette"), n),
-                               lens=None if focal == "take" else run.output("lens.lens"))
-    aligned, _ = align_clip(res["joints"], gt, mode="rigid")
-    return float(np.linalg.norm(aligned - gt, axis=-1).mean() * 1000.0)
+    sil = st.silhouette_field(run.output("silhouette.silhouette"), n)
+    lens = None if focal == "take" else run.output("lens.lens")
+    out = []
+    for r in range(repeats):
+        points = tr.points
+        if r > 0:
+            points = points + np.random.default_rng(r).normal(0.0, jitter_px, points.shape)
+        res = st.solve_take_arrays(points, tr.tracked, body_lengths(None), tr.width, tr.height, float(tr.fps),
+                                   st.SolveTakeParams(**p), silhouette=sil, lens=lens)
+        aligned, _ = align_clip(res["joints"], gt, mode="rigid")
+        out.append(float(np.linalg.norm(aligned - gt, axis=-1).mean() * 1000.0))
+    return out
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -76,7 +93,11 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                     help="a reconstruct.solve_take param (YAML value), repeatable")
     ap.add_argument("--focal", choices=("room", "given", "take"), default="room")
+    ap.add_argument("--repeats", type=int, default=1, help="solves per take: the tracks as they are, then with noise")
+    ap.add_argument("--jitter-px", type=float, default=0.05, help="sd of the noise added to the tracks in repeats 2..K, pixels")
     args = ap.parse_args(argv)
+    if args.repeats < 1 or args.jitter_px < 0:
+        ap.error("--repeats must be >= 1 and --jitter-px >= 0")
     params = {}
     for item in args.set:
         key, sep, value = item.partition("=")
@@ -91,12 +112,16 @@ def main(argv: list[str] | None = None) -> None:
     mm = {}
     for take in ["sample"] + [t[0] for t in SOLVER_TAKES] + TURNING:
         name = take if isinstance(take, str) else f"{take[0]}_{take[1]}"
-        mm[name] = solve(take, params, args.focal, cache)
-        print(f"{name}_mpjpe_mm={mm[name]:.1f}", flush=True)
-    v = list(mm.values())
-    print(f"solver4_mean_mm={np.mean(v[:4]):.1f}")
-    print(f"turning12_mean_mm={np.mean(v[4:]):.1f}")
-    print(f"all16_mean_mm={np.mean(v):.1f}")
+        mm[name] = solve(take, params, args.focal, cache, args.repeats, args.jitter_px)
+        print(f"{name}_mpjpe_mm={np.mean(mm[name]):.1f}", flush=True)
+        if args.repeats > 1:
+            print(f"{name}_mpjpe_mm_min={min(mm[name]):.1f}\n{name}_mpjpe_mm_max={max(mm[name]):.1f}", flush=True)
+    v = np.array(list(mm.values()))  # (takes, repeats)
+    for label, rows in (("solver4", v[:4]), ("turning12", v[4:]), ("all16", v)):
+        per_repeat = rows.mean(axis=0)
+        print(f"{label}_mean_mm={per_repeat.mean():.1f}")
+        if args.repeats > 1:
+            print(f"{label}_mean_mm_min={per_repeat.min():.1f}\n{label}_mean_mm_max={per_repeat.max():.1f}")
 
 
 if __name__ == "__main__":
