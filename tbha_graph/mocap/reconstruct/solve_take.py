@@ -118,7 +118,8 @@ class SolveTakeParams(BaseModel):
                             "wrong depth basin win on its closer fit (131_01: the truth's minimum 25 cost units worse in "
                             "reprojection, 60 better in the priors); measured on 16 renders' mean seq-MPJPE, room's focal "
                             "length: 1 / 1.5 / 2 / 3 px 138.3 / 133.2 / 124.6 / 132.0 mm (true focal length: 1 / 2 px "
-                            "142.9 / 126.8)", json_schema_extra={"unit": "px"})
+                            "142.9 / 126.8); single draws, each uncertain by ~15 mm: over 3 repeats (bench/solver_sweep.py "
+                            "--repeats 3, no hang) 1 / 2 px 136.1 / 126.8 mm", json_schema_extra={"unit": "px"})
     sigma_acc: float = Field(30.0, gt=0, description="typical joint acceleration (smoothness prior)", json_schema_extra={"unit": "m/s^2"})
     sigma_twist: float = Field(0.2, gt=0, description="pelvis-thorax twist prior: difference of their unit forward vectors (0.2: about 11 degrees; walking twists 5-15)")
     sigma_acc_torso: float | None = Field(5.0, gt=0, description="torso joints' (hips, spine, shoulders, hip joints) acceleration prior, tighter than the limbs' (walking moves the hips at 2-3 m/s^2): it steadies the body's depth, which the image fixes only weakly; None: sigma_acc", json_schema_extra={"unit": "m/s^2"})
@@ -138,7 +139,8 @@ class SolveTakeParams(BaseModel):
                                      "(the actor's back to the camera): each limb bone kept near straight down with this sd "
                                      "(unit vectors; None: off). No limb patch is seen there and the outline alone let the "
                                      "limbs flail (131_01 left/right: 200-330 mm off their root). 16 renders' mean "
-                                     "seq-MPJPE (bench/solver_sweep.py): off 124.6, 0.3 122.0, 0.5 120.6, 1 112.7, 2 118.7 mm")
+                                     "seq-MPJPE (bench/solver_sweep.py): off 124.6, 0.3 122.0, 0.5 120.6, 1 112.7, 2 118.7 mm "
+                                     "(single draws); over 3 repeats (--repeats 3) off 126.8, 0.7 120.3, 1 116.5, 1.5 121.7 mm")
     select_sigma_px: float = Field(1.0, gt=0, description="tracking sd while the focal length is chosen from the take alone "
                                    "(no room lines, no focal_px): the choice leans on the fit; measured on 16 renders at 2 px "
                                    "the four solver takes' mean went 87.6 -> 150.8 mm", json_schema_extra={"unit": "px"})

@@ -181,11 +181,11 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
         out[:, row, J["hips"]] -= du
         row += 1  # the limbs hanging on head-only frames: d unit(P_b - P_a) = U (dP_b - dP_a)
         _, on = hang_residual(P, dr, w)
-        if on.any():
+        if on.any():  # every hanging bone's unit-vector derivative at once, (n, bones, 3, 3)
+            U = unit_jacobian(P[:, HANG_BONES] - P[:, PARENTS[HANG_BONES]])[1] * (on / w.sigma_hang)[:, None, None, None]
             for k, b in enumerate(HANG_BONES):
-                U = unit_jacobian(P[:, b] - P[:, PARENTS[b]])[1] * (on / w.sigma_hang)[:, None, None]
-                out[:, row + 3 * k:row + 3 * k + 3, b] += U
-                out[:, row + 3 * k:row + 3 * k + 3, PARENTS[b]] -= U
+                out[:, row + 3 * k:row + 3 * k + 3, b] += U[:, k]
+                out[:, row + 3 * k:row + 3 * k + 3, PARENTS[b]] -= U[:, k]
         if parts is not None:
             parts["bottom"] = np.concatenate([bot["dr_dS"], bot["dlogf"][:, None], bot["A"]], axis=1)
             parts["sil_dlogf"] = sil["dlogf"]
