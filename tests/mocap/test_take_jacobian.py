@@ -11,9 +11,9 @@ import numpy as np
 
 from tbha_graph.mocap.reconstruct.solve_take import contacts_from_image, rest_pair_distances
 from tbha_graph.mocap.reconstruct.take_jacobian import joint_jacobian, residual_jacobian
-from tbha_graph.mocap.reconstruct.take_model import (DEFAULT_POINT_OFFSETS, HINGES, N_COVER, N_FRAME_RES, N_HANG, N_SIL, PER_FRAME,
-                                                     TORSO_PAIRS, SilhouetteField, TakeData, TakeProblem, Weights,
-                                                     bone_directions, pack_initial, point_positions)
+from tbha_graph.mocap.reconstruct.take_model import (DEFAULT_POINT_OFFSETS, HINGES, N_COVER, N_FACING, N_FRAME_RES, N_HANG, N_SIL,
+                                                     PER_FRAME, TORSO_PAIRS, SilhouetteField, TakeData, TakeProblem, Weights,
+                                                     bone_directions, fronts, pack_initial, point_positions, unit)
 from tbha_graph.mocap.segment.silhouette import distance_outside
 
 TRUTH = Path(__file__).resolve().parents[2] / "data" / "sample" / "ground_truth.npz"
@@ -23,7 +23,8 @@ KINDS = {"reprojection": slice(0, 32), "torso": slice(32, 32 + len(TORSO_PAIRS))
          "support": slice(N_FRAME_RES + N_SIL - 4, N_FRAME_RES + N_SIL - 3), "away": slice(N_FRAME_RES + N_SIL - 3, N_FRAME_RES + N_SIL - 1),
          "bottom": slice(N_FRAME_RES + N_SIL - 1, N_FRAME_RES + N_SIL), "cover": slice(N_FRAME_RES + N_SIL, N_FRAME_RES + N_SIL + N_COVER),
          "upright": slice(N_FRAME_RES + N_SIL + N_COVER, N_FRAME_RES + N_SIL + N_COVER + 1),
-         "hang": slice(N_FRAME_RES + N_SIL + N_COVER + 1, N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG)}
+         "hang": slice(N_FRAME_RES + N_SIL + N_COVER + 1, N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG),
+         "facing": slice(N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG, N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_FACING)}
 
 
 def thin_silhouettes(uv: np.ndarray, scale: float = 0.5, shape=(240, 320), ghost: float = 0.0, width: int = 1) -> SilhouetteField:
@@ -69,8 +70,11 @@ def test_analytic_frame_jacobian_equals_central_differences():
     contact[::2] = True
     joints_uv = 700.0 * P[..., :2] / P[..., 2:3] + centre
     nf, d = R[:, 1], float(-R[:, 1] @ t)
+    facing = unit(np.stack(fronts(P), axis=1) + np.random.default_rng(4).normal(scale=0.2, size=(n, 2, 3)))  # a detector's fronts, ~12 deg off
+    facing[::5] *= -1.0  # mirrored on some frames: beyond the soft-L1 scale
+    facing[3::7, 1] = 0.0  # and no pelvis front on others
     data = TakeData(uv, weight, L, centre, fps, 0.08, contact, rest_pair_distances(L, 0.08),
-                    silhouette=thin_silhouettes(joints_uv, ghost=60.0), away=np.arange(n) % 2 == 0, up=-nf)
+                    silhouette=thin_silhouettes(joints_uv, ghost=60.0), away=np.arange(n) % 2 == 0, up=-nf, facing=facing)
     prob = TakeProblem(data, bone_directions(P), nf, Weights(sigma_twist=0.2, support_band=-0.03, upright_sin=0.15,
                                                           sigma_hang=0.5),
                        DEFAULT_POINT_OFFSETS.copy(), free_offsets=False)
@@ -79,7 +83,7 @@ def test_analytic_frame_jacobian_equals_central_differences():
     fr[:, 3:] += rng.normal(scale=0.35, size=(n, PER_FRAME - 3))  # bones turned ~20 degrees: hinges bent wrongly
     h = 1e-6
     F = prob.n_frame_res
-    assert F == N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG
+    assert F == N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_FACING
     num = np.empty((n, F, PER_FRAME))
     for i in range(PER_FRAME):
         fp, fm = fr.copy(), fr.copy()
@@ -101,6 +105,8 @@ def test_analytic_frame_jacobian_equals_central_differences():
     assert (upright[::2] > 0).mean() > 0.6 and not upright[1::2].any()  # measured 0.93; only where flagged away
     hang = prob.frame_terms(Pj, g)[:, KINDS["hang"]]
     assert (np.abs(hang[::2]).sum(axis=1) > 0).all() and not hang[1::2].any()  # only where flagged away
+    fac = prob.frame_terms(Pj, g)[:, KINDS["facing"]]
+    assert not fac[3::7, 3:].any() and (np.abs(fac[::5]) > prob.w.robust_scale).any()  # missing hints cost nothing; mirrored ones beyond the scale
     cover = prob.frame_terms(Pj, g)[:, KINDS["cover"]]
     assert not cover[weight[:, 1] > 0].any()  # only where the torso is not seen
     assert (cover[1::4] > 0).mean() > 0.22 and (cover > prob.w.robust_scale).any()  # measured 0.33, some beyond the soft-L1 scale

@@ -151,6 +151,8 @@ class SolveTakeParams(BaseModel):
     window_overlap: int = Field(30, ge=6, description="frames two neighbouring windows share (cross-faded)")
     cross_seed: bool = Field(True, description="re-solve the best start's depth sides at the other starts' focal lengths, "
                              "to warn when the take does not determine the focal length (never changes the choice)")
+    sigma_facing: float = Field(0.3, gt=0, description="with tracks that carry a detector's torso facing (detect.mediapipe_pose): "
+                                "each front's unit vector minus the detector's, soft-L1 beyond 2 sd (0.5: about 30 degrees)")
     sigma_sil: float = Field(4.0, gt=0, description="with a silhouette input: a joint or bone midpoint projected outside "
                              "the actor's silhouette, beyond 2 px, costs (distance / sigma_sil)² (soft-L1 beyond 2 sigmas)",
                              json_schema_extra={"unit": "px"})
@@ -327,10 +329,12 @@ def facing_away(weight: np.ndarray) -> np.ndarray:
 
 def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: SolveTakeParams, free_offsets: bool,
                  focal_prior=None, contact=None, held_globals: np.ndarray | None = None,
-                 silhouette: SilhouetteField | None = None, floor_prior=None) -> tuple[TakeProblem, float]:
+                 silhouette: SilhouetteField | None = None, floor_prior=None,
+                 facing: np.ndarray | None = None) -> tuple[TakeProblem, float]:
     """A :class:`TakeProblem` around joints ``P`` and a floor ``(normal (3,), offset)`` (or a camera whose world
     y is up); contacts detected from ``P`` unless given; the actor's ``silhouette`` on these frames, if any;
-    ``floor_prior`` ``(up (3,) camera frame, sd radians)``, the floor's normal as the room shows it, if known.
+    ``floor_prior`` ``(up (3,) camera frame, sd radians)``, the floor's normal as the room shows it, if known;
+    ``facing`` ``(n, 2, 3)`` the torso's fronts as a detector shows them (:attr:`.take_model.TakeData.facing`), if any.
     Returns the problem and the floor offset."""
     if isinstance(cam_or_floor, Camera):
         nf, d = cam_or_floor.R[:, 1], float(-cam_or_floor.R[:, 1] @ cam_or_floor.t)
@@ -341,9 +345,9 @@ def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: Solve
     contact = np.asarray(contact, dtype=bool)
     data = TakeData(points, weight, lengths, centre, fps, p.ankle_height, contact,
                     rest_pair_distances(lengths, p.ankle_height), silhouette=silhouette,
-                    away=None if silhouette is None else facing_away(weight), up=nf)
+                    away=None if silhouette is None else facing_away(weight), up=nf, facing=facing)
     w = Weights(sigma_px=p.sigma_px, sigma_acc=p.sigma_acc, sigma_twist=p.sigma_twist, sigma_acc_torso=p.sigma_acc_torso,
-                sigma_sil=p.sigma_sil, sigma_hang=p.sigma_hang)
+                sigma_sil=p.sigma_sil, sigma_hang=p.sigma_hang, sigma_facing=p.sigma_facing)
     offsets = point_offsets_of(p)
     return TakeProblem(data, bone_directions(P), nf, w, offsets, fixed_globals=held_globals, free_offsets=free_offsets,
                        focal_prior=focal_prior, free_lengths=p.free_lengths, floor_prior=floor_prior), d
@@ -351,13 +355,14 @@ def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: Solve
 
 def solve_frames(points, weight, lengths, centre, fps, P0, floor, g_start, p, iterations, free_offsets, focal_prior,
                  side_search: bool, contact: np.ndarray | None = None, hold_globals: bool = False, tol: float = 1e-5,
-                 silhouette: SilhouetteField | None = None, floor_prior=None):
+                 silhouette: SilhouetteField | None = None, floor_prior=None, facing: np.ndarray | None = None):
     """Whole-take solve from joints ``P0``: LM, then (optionally) the depth-side search and LM again; the globals
     ``g_start`` held when ``hold_globals`` (a window of a long take: camera and floor known); the actor's
-    ``silhouette`` on these frames, if any. Returns ``(problem, x, cost, normal equations, flips kept)``."""
+    ``silhouette`` and a detector's torso ``facing`` on these frames, if any. Returns ``(problem, x, cost, normal
+    equations, flips kept)``."""
     def start(P, fl, g):
         prob, _ = make_problem(points, weight, lengths, centre, fps, P, fl, p, free_offsets, focal_prior, contact,
-                               g if hold_globals else None, silhouette, floor_prior)
+                               g if hold_globals else None, silhouette, floor_prior, facing)
         x = pack_initial(P, prob.ref)
         return prob, (x if hold_globals else np.concatenate([g, x]))
 
@@ -390,12 +395,12 @@ def joints_from_directions(root: np.ndarray, dirs: np.ndarray, lengths: np.ndarr
 
 def solve_windows(points, weight, lengths, centre, fps, P0, floor, g, p: SolveTakeParams, contact,
                   window: int, overlap: int, progress=None,
-                  silhouette: SilhouetteField | None = None) -> tuple[np.ndarray, int, int]:
+                  silhouette: SilhouetteField | None = None, facing: np.ndarray | None = None) -> tuple[np.ndarray, int, int]:
     """The final solve of a long take in overlapping windows of ``window`` frames, camera and floor held
     (globals ``g``, floor ``(normal, offset)``): LM, the depth-side search, LM on each window in turn, started
     from ``P0`` ``(n, 16, 3)`` with its first ``overlap`` frames from the previous window's solution (so depth
     sides carry on), which it replaces over the overlap by a linear cross-fade of root positions and bone
-    directions (the actor's ``silhouette``, if any, on each window's frames). Memory is that of one window;
+    directions (the actor's ``silhouette`` and a detector's torso ``facing``, if any, on each window's frames). Memory is that of one window;
     time is linear in the frames. Returns joints ``(n, 16, 3)`` (camera frame, metres), the mirrors kept and the
     number of windows; ``progress`` (optional) wraps the windows' iterable as ``ctx.progress`` does."""
     n = P0.shape[0]
@@ -414,7 +419,8 @@ def solve_windows(points, weight, lengths, centre, fps, P0, floor, g, p: SolveTa
         rows = slice(a, b)
         prob, x, _, _, k = solve_frames(points[rows], weight[rows], lengths, centre, fps, P[rows], floor, g, p,
                                         p.max_iterations, False, None, p.side_search, contact[rows], hold_globals=True,
-                                        tol=POSE_TOL, silhouette=None if silhouette is None else silhouette.subset(rows))
+                                        tol=POSE_TOL, silhouette=None if silhouette is None else silhouette.subset(rows),
+                                        facing=None if facing is None else facing[rows])
         kept += k
         Pw = prob.solution(x)[4]
         lo = prev_end - a
@@ -472,13 +478,15 @@ def world_frame(P: np.ndarray, nf: np.ndarray, d: float) -> tuple[np.ndarray, np
 
 def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarray, width: int, height: int,
                       fps: float, p: SolveTakeParams, progress=None, confidence: np.ndarray | None = None,
-                      silhouette: SilhouetteField | None = None, lens: LensEstimate | None = None) -> dict:
+                      silhouette: SilhouetteField | None = None, lens: LensEstimate | None = None,
+                      facing: np.ndarray | None = None) -> dict:
     """The whole solve (see the module docstring) on 2D points ``(n, 16, 2)`` px; ``progress`` (optional, as
     ``ctx.progress``: wraps an iterable) shows the starts and the pose windows; ``silhouette`` (optional) the
     actor's outline on every frame; ``lens`` (optional) a focal length found before (``calibrate.vanishing_points``;
     ignored when it holds none): without ``p.focal_px`` the solve starts there and keeps it as a prior (its sd and
     :data:`LENS_SD_FLOOR` combined), and the floor's normal found with it (``up_cam``) as a prior too (sd at least
-    :data:`FLOOR_SD_FLOOR_DEG`). Returns a dict with
+    :data:`FLOOR_SD_FLOOR_DEG`); ``facing`` (optional) ``(n, 2, 3)`` the thorax's and the pelvis's fronts (unit, camera
+    axes; zero vectors where unknown) as a detector's own 3D shows them, a prior (``sigma_facing``). Returns a dict with
     ``joints`` (n, 16, 3) world metres, ``camera`` (:class:`Camera`), ``sides`` (n, 16) int8, ``report``.
 
     BLAS runs on one thread meanwhile: the solver's matrices are small (33 x 33 frame blocks, a band of 99),
@@ -488,11 +496,14 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(limits=1, user_api="blas"):
-        return _solve_take(points, tracked, lengths, width, height, fps, p, progress, confidence, silhouette, lens)
+        return _solve_take(points, tracked, lengths, width, height, fps, p, progress, confidence, silhouette, lens, facing)
 
 
 def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams, progress, confidence, sil,
-                lens=None) -> dict:
+                lens=None, facing=None) -> dict:
+    def hint(rows):  # the detector's facing on these frames (None without one)
+        return None if facing is None else np.asarray(facing, dtype=np.float64)[rows]
+
     t0 = time.perf_counter()
     floor_prior = None
     n = points.shape[0]
@@ -541,7 +552,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
         g0 = globals_vector(f0, float(-cam.R[:, 1] @ cam.t), False, p.free_lengths)
         prob_k, x_k, cost_k, _, kept = solve_frames(points[sub], weight[sub], lengths, centre, fps / step, P0[sub], cam,
                                                     g0, q, p.calib_iterations, False, focal_prior, p.side_search,
-                                                    contact[sub], floor_prior=floor_prior)
+                                                    contact[sub], floor_prior=floor_prior, facing=hint(sub))
         f_end = float(np.exp(prob_k.globals_of(x_k)[0]))
         sweep.append([round(f0, 1), round(f_end, 1), round(cost_k, 1)])
         if best is None or cost_k < best[0]:
@@ -565,7 +576,8 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
             gs = np.concatenate([[np.log(f_end), 0.0, 0.0, d_k], probs.globals_of(xs)[4:]])
             prob_k, x_k, cost_k, _, _ = solve_frames(points[sub], weight[sub], lengths, centre, fps / step, P_k,
                                                      (nf_b, d_k), gs, q, p.calib_iterations, False,
-                                                     focal_prior, False, contact[sub], floor_prior=floor_prior)
+                                                     focal_prior, False, contact[sub], floor_prior=floor_prior,
+                                                     facing=hint(sub))
             cross.append([round(f_end, 1), round(float(np.exp(prob_k.globals_of(x_k)[0])), 1), round(cost_k, 1)])
         report["focal_cross_seeded"] = cross
         sweep = sweep + cross
@@ -580,7 +592,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
     gs = np.concatenate([g_sub[:1], [0.0, 0.0, d0], g_sub[4:]])
     prob, x, cost, ne, _ = solve_frames(points[cam_rows], weight[cam_rows], lengths, centre, fps / k_cam, P1[cam_rows],
                                         (nf0, d0), gs, q, p.max_iterations, False, focal_prior, False, contact[cam_rows],
-                                        floor_prior=floor_prior)
+                                        floor_prior=floor_prior, facing=hint(cam_rows))
     kept2 = 0
     # uncertainty of the focal length (log f) from the normal equations, scaled by the fit's residual level
     dof = max(prob.residuals(x).size - x.size, 1)
@@ -597,7 +609,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
             P_s = seat_on_outline(P_s, f_sel, centre, nf_s, d_s, sil, facing_away(weight))
         prob, x, cost, ne, kept2 = solve_frames(points, weight, lengths, centre, fps, P_s, (nf_s, d_s), g_s, p,
                                                 p.max_iterations, False, (f_sel, 1e-4), p.side_search, contact,
-                                                tol=POSE_TOL, silhouette=sil, floor_prior=floor_prior)
+                                                tol=POSE_TOL, silhouette=sil, floor_prior=floor_prior, facing=hint(slice(None)))
     elif not whole:  # the same in windows, camera and floor held
         f_sel, nf_s, d_s, _, P_s = prob.solution(x)
         g_s = np.concatenate([[np.log(f_sel), 0.0, 0.0, d_s], prob.globals_of(x)[4:]])
@@ -605,8 +617,10 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
         if sil is not None:
             P_w = seat_on_outline(P_w, f_sel, centre, nf_s, d_s, sil, facing_away(weight))
         P_w, kept2, report["windows"] = solve_windows(points, weight, lengths, centre, fps, P_w,
-                                   (nf_s, d_s), g_s, p, contact, p.window_frames, p.window_overlap, progress, sil)
-        prob, _ = make_problem(points, weight, lengths, centre, fps, P_w, (nf_s, d_s), p, False, None, contact, g_s, sil)
+                                   (nf_s, d_s), g_s, p, contact, p.window_frames, p.window_overlap, progress, sil,
+                                   hint(slice(None)))
+        prob, _ = make_problem(points, weight, lengths, centre, fps, P_w, (nf_s, d_s), p, False, None, contact, g_s, sil,
+                               facing=hint(slice(None)))
         x = pack_initial(P_w, prob.ref)
     f, nf, d, offs, P = prob.solution(x)
     terms = prob.term_costs(x)
@@ -703,8 +717,16 @@ def solve_take(ctx, tracks, body, silhouette=None, lens=None):
         if (lens.width, lens.height) != (tr.width, tr.height):
             raise NodeError(f"the lens estimate is for {lens.width}x{lens.height} px images, the tracks are "
                             f"{tr.width}x{tr.height}", hint="connect the lens found on the same video as the tracks")
+    facing = tracks.get("facing") if isinstance(tracks, dict) else None
+    if facing is not None:
+        facing = np.asarray(facing, dtype=np.float64)
+        if facing.shape != (tr.n_frames, 2, 3):
+            raise NodeError(f"the tracks' facing has shape {facing.shape}, expected ({tr.n_frames}, 2, 3)",
+                            hint="facing: per frame the thorax's and the pelvis's front, camera axes")
+        ctx.log(f"torso facing from the tracks on {100 * (np.linalg.norm(facing[:, 0], axis=-1) > 0.5).mean():.0f} % of frames "
+                "(the detector's own 3D)")
     out = solve_take_arrays(tr.points, tr.tracked, lengths, tr.width, tr.height, float(tr.fps), p,
-                            progress=ctx.progress, confidence=confidence, silhouette=sil, lens=lens)
+                            progress=ctx.progress, confidence=confidence, silhouette=sil, lens=lens, facing=facing)
     rep = out["report"]
     ctx.log(f"focal {rep['focal_px']:.0f} px (± {rep['focal_sd_pct']:.1f} %), camera {rep['camera_height_m']:.2f} m high, "
             f"{rep['camera_distance_m']:.2f} m away, tilt {rep['camera_tilt_deg']:.1f}°; {rep['solve_seconds']:.1f} s")

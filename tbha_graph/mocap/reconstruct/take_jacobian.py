@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..skeleton import N_JOINTS, PARENTS
-from .take_model import (ANKLES, AXIS_TRIPLES, HANG_BONES, HINGES, J, N_BONES, N_COVER, N_FRAME_RES, N_SIL, PELVIS_JOINTS,
+from .take_model import (ANKLES, AXIS_TRIPLES, HANG_BONES, HINGES, J, N_BONES, N_COVER, N_FACING, N_FRAME_RES, N_SIL, PELVIS_JOINTS,
                          PELVIS_SIDE, PER_FRAME, SIL_PAIRS, THORAX_JOINTS, TORSO_PAIRS, TakeProblem, bottom_residual,
                          cover_residuals, cover_segments, hang_residual, robust_slope, sil_residuals, torso_unseen, unit,
                          unseen_points, upright_residual)
@@ -190,6 +190,15 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
             parts["bottom"] = np.concatenate([bot["dr_dS"], bot["dlogf"][:, None], bot["A"]], axis=1)
             parts["sil_dlogf"] = sil["dlogf"]
             parts["cover_dlogf"] = cov["dlogf"]
+    if d.facing is not None:  # the last block: robust((front - hint) / sigma) per coordinate, thorax then pelvis
+        row = prob.n_frame_res - N_FACING
+        hint = np.asarray(d.facing, dtype=np.float64)[rows]
+        on = (np.linalg.norm(hint, axis=-1) > 0.5)  # (n, 2)
+        for k, (fr, dfr, fj) in enumerate(((thorax, d_thorax, THORAX_JOINTS), (pelvis, d_pelvis, PELVIS_JOINTS))):
+            e = (fr - hint[:, k]) * on[:, k, None] / w.sigma_facing
+            slope = robust_slope(e, w.robust_scale) * on[:, k, None] / w.sigma_facing  # (n, 3)
+            for jj, Dj in zip(fj, dfr):
+                out[:, row + 3 * k:row + 3 * k + 3, jj] += slope[..., None] * Dj
     return out
 
 

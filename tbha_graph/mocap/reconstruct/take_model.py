@@ -161,13 +161,17 @@ class TakeData:
     #: ``(n,)`` bool or None: frames where the actor is seen (head tracked) but none of the torso's patches is —
     #: the suit's patches are on the body's front, so the torso faces away (used with a silhouette only)
     away: np.ndarray | None = None
+    #: ``(n, 2, 3)`` or None: the thorax's and the pelvis's front (unit, camera frame) as a detector's own 3D shows
+    #: them (zero vectors where it shows none), a prior on which way the torso faces (:func:`facing_residual`)
+    facing: np.ndarray | None = None
 
     def subset(self, rows, breaks: np.ndarray | None = None) -> "TakeData":
         """The data of the frames ``rows`` (slice or index array), with ``breaks`` for them."""
         return TakeData(self.points[rows], self.weight[rows], self.lengths, self.centre, self.fps, self.ankle_height,
                         self.contact[rows], self.rest_pairs, breaks=breaks,
                         silhouette=None if self.silhouette is None else self.silhouette.subset(rows),
-                        away=None if self.away is None else np.asarray(self.away)[rows], up=self.up)
+                        away=None if self.away is None else np.asarray(self.away)[rows], up=self.up,
+                        facing=None if self.facing is None else np.asarray(self.facing)[rows])
 
     def acc_mask(self) -> np.ndarray:
         """``(n - 2,)`` 1.0 where the acceleration term of frames (t, t+1, t+2) lies inside one segment."""
@@ -211,6 +215,7 @@ class Weights:
     sigma_hang: float | None = None  # with a silhouette, on frames flagged ``away``: each limb bone's direction minus straight
     #                              down, over this (unit vectors), costs its square: the limbs' patches are unseen there and the
     #                              outline alone let them flail (None: off)
+    sigma_facing: float = 0.5    # with a facing hint (TakeData.facing): each front's unit vector minus the hint's, soft-L1 beyond robust_scale
     sigma_cover: float = 4.0     # with a silhouette: a sample of the outline farther from every projected bone than
     cover_tolerance: float = 0.06  # this fraction of the outline's height (about 0.1 m: the body's half thickness)
     #                                costs (excess px / sigma_cover)², soft-L1 beyond robust_scale (the model covers the outline)
@@ -464,6 +469,17 @@ def hang_residual(P: np.ndarray, d: TakeData, w: "Weights") -> tuple[np.ndarray,
     return ((u + up) * (on / w.sigma_hang)[:, None, None]).reshape(n, N_HANG), on
 
 
+def facing_residual(thorax: np.ndarray, pelvis: np.ndarray, d: TakeData, w: "Weights") -> np.ndarray:
+    """The torso facing as a detector's own 3D shows it ``(..., n, 6)``: ``robust((front - hint) / sigma_facing)``
+    for the thorax's and the pelvis's fronts ``(..., n, 3)`` (camera frame) against ``d.facing`` (0 where the hint
+    is a zero vector). A single camera leaves a torso turned towards it and the mirror turn away from it almost
+    equally cheap where few torso points are seen; a detector trained on people knows which way they face."""
+    hint = np.asarray(d.facing, dtype=np.float64)
+    on = (np.linalg.norm(hint, axis=-1) > 0.5)[..., None]  # (n, 2, 1)
+    r = np.concatenate([(thorax - hint[:, 0]) * on[:, 0], (pelvis - hint[:, 1]) * on[:, 1]], axis=-1)
+    return robust(r / w.sigma_facing, w.robust_scale)
+
+
 def seat_on_outline(P: np.ndarray, f: float, centre: np.ndarray, nf: np.ndarray, dfl: float, sil: SilhouetteField,
                     frames: np.ndarray, lift_px: float = -1.0, scales: np.ndarray = np.geomspace(0.6, 1.8, 241)) -> np.ndarray:
     """A start for the frames where the image says little of the body: joints ``P`` ``(n, 16, 3)`` (camera frame)
@@ -513,9 +529,12 @@ class Layout:
 
 #: Residuals per frame that depend on that frame alone: reprojection (16 x 2), torso distances, hinges,
 #: ankle below the floor (2), planted ankle off the floor (2), pose prior (head along the neck, 3; pelvis
-#: facing where the thorax faces, 3); with a silhouette, :data:`N_SIL` + :data:`N_COVER` + 1 + :data:`N_HANG` more
-#: (:attr:`TakeProblem.n_frame_res`).
+#: facing where the thorax faces, 3); with a silhouette, :data:`N_SIL` + :data:`N_COVER` + 1 + :data:`N_HANG` more,
+#: with a facing hint :data:`N_FACING` more (:attr:`TakeProblem.n_frame_res`).
 N_FRAME_RES = N_JOINTS * 2 + len(TORSO_PAIRS) + len(HINGES) + 4 + 6
+#: With a facing hint (:attr:`TakeData.facing`), the last residuals of a frame: the thorax's and the pelvis's
+#: fronts against the hint's (:func:`facing_residual`)
+N_FACING = 6
 
 
 class TakeProblem:
@@ -544,7 +563,8 @@ class TakeProblem:
         # (up (3,) camera frame, sigma radians): the floor's normal as the room's lines show it
         self.floor_prior = None if floor_prior is None else (unit(np.asarray(floor_prior[0], dtype=np.float64)), float(floor_prior[1]))
         self.n_glob = 0 if fixed_globals is not None else self.layout.n_globals
-        self.n_frame_res = N_FRAME_RES + (N_SIL + N_COVER + 1 + N_HANG if data.silhouette is not None else 0)
+        self.n_frame_res = (N_FRAME_RES + (N_SIL + N_COVER + 1 + N_HANG if data.silhouette is not None else 0)
+                            + (N_FACING if data.facing is not None else 0))
         self.set_refs(ref, n_ref)
 
     def set_refs(self, ref: np.ndarray, n_ref: np.ndarray) -> None:
@@ -628,6 +648,8 @@ class TakeProblem:
                       np.stack(facing, axis=-1), bottom_residual(P, f, d.centre, nf, dfl, d.silhouette, w)[0][:, None],
                       cover_residuals(P, f, d.centre, d.silhouette, d.lengths, w, mask=torso_unseen(d.weight))[0],
                       upright_residual(P, d, w)[0][:, None], hang_residual(P, d, w)[0]]
+        if d.facing is not None:  # the last block: the fronts against the detector's
+            terms.append(facing_residual(thorax, pelvis, d, w))
         return np.concatenate(terms, axis=-1)
 
     def slide_vectors(self, P: np.ndarray, nf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -683,10 +705,12 @@ class TakeProblem:
         P = self.joints_from_frames(self.frames_of(x), self.lengths_of(g))
         F = self.frame_terms(P, g)
         acc, slide = self.coupled_terms(P, self.floor(g)[0])
-        sil = self.n_frame_res - N_FRAME_RES
+        fac = N_FACING if self.d.facing is not None else 0
+        sil = self.n_frame_res - N_FRAME_RES - fac
         extra = [N_COVER, 1, N_HANG] if sil else [0, 0, 0]  # the cover, upright and hang terms end the silhouette's block
-        k = np.cumsum([0, N_JOINTS * 2, len(TORSO_PAIRS), len(HINGES), 2, 2, 6, sil - sum(extra)] + extra)
-        names = ("reprojection", "torso", "hinge", "below_floor", "contact", "pose", "silhouette", "cover", "upright", "hang")
+        k = np.cumsum([0, N_JOINTS * 2, len(TORSO_PAIRS), len(HINGES), 2, 2, 6, sil - sum(extra)] + extra + [fac])
+        names = ("reprojection", "torso", "hinge", "below_floor", "contact", "pose", "silhouette", "cover", "upright", "hang",
+                 "facing")
         out = {nm: 0.5 * float(np.sum(F[:, k[i]:k[i + 1]] ** 2)) for i, nm in enumerate(names)}
         out.update(acceleration=0.5 * float(np.sum(acc ** 2)), slide=0.5 * float(np.sum(slide ** 2)),
                    priors=0.5 * float(np.sum(self.global_terms(g) ** 2)))
