@@ -201,23 +201,21 @@ def off_body(tracks: dict, truth: dict, placed_only: bool = False) -> tuple[int,
     return count, total
 
 
-def true_camera_seq_mpjpe(sets: dict, vars: dict, truth: dict) -> float:
+def true_camera_seq_mpjpe(sets: dict, vars: dict, truth: dict, keypoints: bool = False) -> float:
     """seq-MPJPE (mm) of the same capture given the render's camera: with a ``calibrate`` node (the seed's
     chain) the true camera replaces the T-pose calibration (``calibrate.known``); with a solver that
     estimates the camera itself (``reconstruct.solve_take``), its ``focal_px`` var is set to the true focal
     length. What the labelling and the 3D solver give without calibration error."""
     import tempfile
 
-    from tbha_graph.core.spec import read_pipeline
-
-    decl = read_pipeline(ROOT / "pipelines" / "evaluate_render.yaml")
+    decl = render_decl(keypoints)
     if "calibrate" not in decl.nodes:
         from tbha_graph.core.runner import load_graph, run_graph
         from tbha_graph.mocap.evaluate import measures as m
 
         if "focal_px" not in (decl.vars or {}):
             return float("nan")
-        run = run_graph(load_graph(ROOT / "pipelines" / "evaluate_render.yaml", sets=sets,
+        run = run_graph(load_graph(ROOT / "pipelines" / "evaluate_render.yaml", sets=sets, decl=decl,
                                    vars={**vars, "focal_px": float(np.asarray(truth["K"])[0, 0])}),
                         outputs=["metrics.json"], cache=False)
         gt = truth["joints3d_world"]
@@ -243,6 +241,28 @@ def true_camera_seq_mpjpe(sets: dict, vars: dict, truth: dict) -> float:
     return float(np.nanmean(m.joint_distances(aligned, gt))) * 1000.0
 
 
+#: The pipeline whose nodes :func:`render_decl` adds with ``keypoints``: MediaPipe Pose's keypoints where no
+#: torso patch is seen (one definition of that wiring)
+KEYPOINTS_PIPELINE = ROOT / "pipelines" / "suit_mediapipe.yaml"
+
+
+def render_decl(keypoints: bool = False):
+    """``pipelines/evaluate_render.yaml`` read (a ``PipelineDecl`` for ``load_graph(..., decl=...)``), with the
+    nodes of :data:`KEYPOINTS_PIPELINE` merged in when ``keypoints`` (needs the mediapipe extra)."""
+    from tbha_graph.core.errors import Location, PipelineErrors
+    from tbha_graph.core.spec import merge_node_override, read_pipeline
+    from tbha_graph.core.yamlfile import load_yaml
+
+    decl = read_pipeline(ROOT / "pipelines" / "evaluate_render.yaml")
+    if keypoints:
+        data, errors = load_yaml(KEYPOINTS_PIPELINE)
+        for nid, body in ({} if data is None else data.get("nodes", {})).items():
+            merge_node_override(decl, str(nid), body, Location(str(KEYPOINTS_PIPELINE), 1, 1), KEYPOINTS_PIPELINE.parent, errors)
+        if errors:
+            raise PipelineErrors(errors)
+    return decl
+
+
 def take_config(take: str, suit: str) -> tuple[dict, dict]:
     """``(sets, vars)`` of ``pipelines/evaluate_render.yaml`` rendering ``take`` (of :data:`TAKES` or
     :data:`HELD_OUT`) in ``suit`` (of :data:`SUITS`)."""
@@ -252,13 +272,13 @@ def take_config(take: str, suit: str) -> tuple[dict, dict]:
     return sets, {"bvh": str(ROOT / "data" / "mocap" / "cmu" / clip)}
 
 
-def run_take(take: str, suit: str, keep: Path | None) -> dict:
+def run_take(take: str, suit: str, keep: Path | None, keypoints: bool = False) -> dict:
     from tbha_graph.core.runner import load_graph, run_graph
     from tbha_graph.mocap.evaluate import measures as m
     from tbha_graph.mocap.suit import load_suit
 
     sets, vars = take_config(take, suit)
-    graph = load_graph(ROOT / "pipelines" / "evaluate_render.yaml", sets=sets, vars=vars)
+    graph = load_graph(ROOT / "pipelines" / "evaluate_render.yaml", sets=sets, vars=vars, decl=render_decl(keypoints))
     out = None if keep is None else keep / f"{take}-{suit}"
     outputs = ["metrics.json"] if keep is None else None
     t0 = time.perf_counter()
@@ -280,7 +300,7 @@ def run_take(take: str, suit: str, keep: Path | None) -> dict:
     return {
         "take": take, "suit": suit, "frames": len(gt), "turn_deg": heading_range_deg(gt), "seq_mpjpe_mm": seq,
         "seq_mpjpe_seen_mm": seq_seen, "seen_pct": seen_pct,
-        "seq_mpjpe_true_camera_mm": true_camera_seq_mpjpe(sets, vars, truth),
+        "seq_mpjpe_true_camera_mm": true_camera_seq_mpjpe(sets, vars, truth, keypoints),
         "visible": s["visible"], "wrong": s["wrong"], "missed": s["missed"], "delays": s["delays"],
         "delays_detected": s["delays_detected"],
         "off_body": ob, "points": tot, "off_body_placed": obp, "points_placed": totp, "seconds": seconds,
@@ -295,13 +315,15 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--suits", nargs="*", default=list(SUITS), choices=list(SUITS))
     ap.add_argument("--keep", type=Path, default=None, help="write each take's run folder under this folder")
     ap.add_argument("--verbose", action="store_true", help="also print the frames with identity errors")
+    ap.add_argument("--keypoints", action="store_true", help="capture with pipelines/suit_mediapipe.yaml's additions: "
+                    "MediaPipe's keypoints where no torso patch is seen (needs the mediapipe extra)")
     a = ap.parse_args(argv)
     if a.takes is None:
         a.takes = list(HELD_OUT) if a.held_out else list(TAKES)
     rows = []
     for suit in a.suits:
         for take in a.takes:
-            r = run_take(take, suit, a.keep)
+            r = run_take(take, suit, a.keep, a.keypoints)
             rows.append(r)
             d = np.asarray(r["delays_detected"]) if r["delays_detected"] else np.zeros(0)
             dv = np.asarray(r["delays"]) if r["delays"] else np.zeros(0)

@@ -28,16 +28,17 @@ TAKES = (
 )
 
 
-def render_graph(take: tuple, focal_given: bool = False):
+def render_graph(take: tuple, focal_given: bool = False, decl=None):
     """The default pipeline's graph on a render of ``take`` (an entry of :data:`TAKES`), the render's focal length
-    given to the solver when ``focal_given``: one definition for the bench's sibling scripts and the tests."""
+    given to the solver when ``focal_given``: one definition for the bench's sibling scripts and the tests; ``decl``:
+    the pipeline as read (``bench/labelling.py``'s ``render_decl``) if not evaluate_render.yaml as it is."""
     from tbha_graph.core.runner import load_graph
 
     _, clip, seconds, eye, target, f = take
     vars = {"bvh": str(ROOT / "data" / "mocap" / "cmu" / clip)}
     if focal_given:
         vars["focal_px"] = f
-    return load_graph(ROOT / "pipelines" / "evaluate_render.yaml", vars=vars,
+    return load_graph(ROOT / "pipelines" / "evaluate_render.yaml", vars=vars, decl=decl,
                       sets={"lead_in.duration": seconds, "camera.eye": list(eye), "camera.target": list(target),
                             "camera.focal_px": f})
 

@@ -22,6 +22,7 @@ setting is better than another when its mean is, by more than their spreads.
     python bench/solver_sweep.py --focal given                    # the true focal length given (focal_px)
     python bench/solver_sweep.py --focal take                     # no room lines: the focal length from the take
     python bench/solver_sweep.py --repeats 3                      # each take 3 times (twice with 0.05 px noise)
+    python bench/solver_sweep.py --keypoints                      # with MediaPipe's keypoints (the mediapipe extra)
 """
 from __future__ import annotations
 
@@ -49,24 +50,28 @@ from tbha_graph.mocap.reconstruct import solve_take as st  # noqa: E402
 TURNING = [(take, suit) for take in list(labelling.TAKES) + list(labelling.HELD_OUT) for suit in labelling.SUITS]
 
 
-def take_graph(take):
+def take_graph(take, keypoints: bool = False):
     """The default pipeline's graph for ``take`` (``"sample"``, a solver render's name, or a ``(take, suit)``
-    turning take) and the output holding its ground truth."""
+    turning take) and the output holding its ground truth; with ``keypoints``, ``pipelines/suit_mediapipe.yaml``'s
+    (MediaPipe Pose on the same video: its node ``detect``)."""
     if take == "sample":
-        return load_graph(ROOT / "pipelines" / "default.yaml"), "truth.truth"
+        return load_graph(ROOT / "pipelines" / ("suit_mediapipe.yaml" if keypoints else "default.yaml")), "truth.truth"
+    decl = labelling.render_decl(keypoints)
     if isinstance(take, str):
-        return render_graph(next(t for t in SOLVER_TAKES if t[0] == take)), "render.ground_truth"
+        return render_graph(next(t for t in SOLVER_TAKES if t[0] == take), decl=decl), "render.ground_truth"
     sets, vars = labelling.take_config(*take)
-    return load_graph(ROOT / "pipelines" / "evaluate_render.yaml", sets=sets, vars=vars), "render.ground_truth"
+    return load_graph(ROOT / "pipelines" / "evaluate_render.yaml", sets=sets, vars=vars, decl=decl), "render.ground_truth"
 
 
-def solve(take, params: dict, focal: str, cache: Cache, repeats: int = 1, jitter_px: float = 0.05) -> list[float]:
+def solve(take, params: dict, focal: str, cache: Cache, repeats: int = 1, jitter_px: float = 0.05,
+          keypoints: bool = False) -> list[float]:
     """Seq-MPJPE (mm) of the solver on ``take`` with ``SolveTakeParams(**params)``, one per repeat (the first on
     the tracks as they are, repeat r >= 1 on the tracked points plus Gaussian noise of ``jitter_px`` pixels, seed
     r); ``focal``: ``room`` (the ``lens`` node's estimate, as the default pipeline), ``given`` (the truth's) or
-    ``take`` (no lens)."""
-    graph, truth_ref = take_graph(take)
-    run = run_graph(graph, outputs=["track", "silhouette", "lens", truth_ref.split(".")[0]], cache=cache)
+    ``take`` (no lens); ``keypoints``: with MediaPipe's keypoints where no torso patch is seen."""
+    graph, truth_ref = take_graph(take, keypoints)
+    run = run_graph(graph, outputs=["track", "silhouette", "lens", truth_ref.split(".")[0]] + (["detect"] if keypoints else []),
+                    cache=cache)
     truth = run.output(truth_ref)
     tr = read_tracks(run.output("track.tracks"))
     n = tr.n_frames
@@ -76,13 +81,14 @@ def solve(take, params: dict, focal: str, cache: Cache, repeats: int = 1, jitter
         p["focal_px"] = float(np.asarray(truth["K"])[0, 0])
     sil = st.silhouette_field(run.output("silhouette.silhouette"), n)
     lens = None if focal == "take" else run.output("lens.lens")
+    hints = st.detector_hints(None, *st.detector_keypoints(run.output("detect.tracks"), tr)) if keypoints else None
     out = []
     for r in range(repeats):
         points = tr.points
         if r > 0:
             points = points + np.random.default_rng(r).normal(0.0, jitter_px, points.shape)
         res = st.solve_take_arrays(points, tr.tracked, body_lengths(None), tr.width, tr.height, float(tr.fps),
-                                   st.SolveTakeParams(**p), silhouette=sil, lens=lens)
+                                   st.SolveTakeParams(**p), silhouette=sil, lens=lens, hints=hints)
         aligned, _ = align_clip(res["joints"], gt, mode="rigid")
         out.append(float(np.linalg.norm(aligned - gt, axis=-1).mean() * 1000.0))
     return out
@@ -95,6 +101,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--focal", choices=("room", "given", "take"), default="room")
     ap.add_argument("--repeats", type=int, default=1, help="solves per take: the tracks as they are, then with noise")
     ap.add_argument("--jitter-px", type=float, default=0.05, help="sd of the noise added to the tracks in repeats 2..K, pixels")
+    ap.add_argument("--keypoints", action="store_true", help="pipelines/suit_mediapipe.yaml's MediaPipe keypoints where no "
+                    "torso patch is seen (needs the mediapipe extra; Pose runs once per take, then cached)")
     args = ap.parse_args(argv)
     if args.repeats < 1 or args.jitter_px < 0:
         ap.error("--repeats must be >= 1 and --jitter-px >= 0")
@@ -112,7 +120,7 @@ def main(argv: list[str] | None = None) -> None:
     mm = {}
     for take in ["sample"] + [t[0] for t in SOLVER_TAKES] + TURNING:
         name = take if isinstance(take, str) else f"{take[0]}_{take[1]}"
-        mm[name] = solve(take, params, args.focal, cache, args.repeats, args.jitter_px)
+        mm[name] = solve(take, params, args.focal, cache, args.repeats, args.jitter_px, args.keypoints)
         print(f"{name}_mpjpe_mm={np.mean(mm[name]):.1f}", flush=True)
         if args.repeats > 1:
             print(f"{name}_mpjpe_mm_min={min(mm[name]):.1f}\n{name}_mpjpe_mm_max={max(mm[name]):.1f}", flush=True)

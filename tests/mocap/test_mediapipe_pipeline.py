@@ -99,3 +99,24 @@ def test_mediapipe_pipeline_runs_on_the_sample_and_beats_mediapipes_3d(tmp_path)
     world = detect_landmarks(_Ctx(), _sample_clip(90), mediapipe_pose.params.model_validate({}))[0].world
     theirs = _pa_limbs_mm(joints16_from_landmarks(world[..., :3] @ MEDIAPIPE_TO_WORLD.T, world[..., 3], MEDIAPIPE_POSE)[0], truth)
     assert ours < 77 and ours < 0.75 * theirs, (ours, theirs)
+
+
+def test_suit_mediapipe_pipeline_uses_keypoints_only_where_no_torso_patch_is_seen(tmp_path):
+    """pipelines/suit_mediapipe.yaml: default.yaml plus MediaPipe Pose on the same video, its keypoints wired to
+    the solver. On the sample's first 90 frames every frame shows torso patches, so the keypoints must cost
+    nothing and change nothing (the joints equal default.yaml's but for rounding: the residual vector is longer). (What they do on back-turned frames:
+    test_solve_take.py::test_detector_keypoints_place_limbs_where_no_patch_is_seen; on the turning renders:
+    ``python bench/solver_sweep.py --keypoints``.)"""
+    require_mediapipe()
+    from tbha_graph.core.runner import load_graph, run_graph
+
+    sets = {"decode.stop": 90, "truth.stop": 90}
+    with_kp = load_graph(ROOT / "pipelines" / "suit_mediapipe.yaml", sets=sets)
+    assert with_kp.nodes["reconstruct"].inputs["keypoints"] == ("detect", "tracks")
+    plain = run_graph(load_graph(ROOT / "pipelines" / "default.yaml", sets=sets), outputs=["reconstruct"], cache=False)
+    run = run_graph(with_kp, outputs=["reconstruct", "detect"], cache=False)
+    assert run.output("detect.tracks")["tracked"].mean() > 0.95
+    assert run.output("reconstruct.report")["cost"]["keypoints"] == 0.0
+    assert "keypoints" not in plain.output("reconstruct.report")["cost"]
+    diff = np.abs(run.output("reconstruct.motion")["joints"] - plain.output("reconstruct.motion")["joints"]).max()
+    assert diff < 1e-3, diff  # metres; measured 2e-7

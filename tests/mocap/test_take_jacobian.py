@@ -2,7 +2,9 @@
 term by term, with every kind of residual active (bent-wrong hinges, ankles below the floor and planted ones
 above it, twisted torsos, points with zero weight, robust reprojection beyond its scale, joints and bone
 midpoints outside the actor's silhouette, some beyond the soft-L1 scale, the lower ankle above its support
-band, the torso facing the camera on frames flagged away, the feet above the silhouette's lowest row)."""
+band, the torso facing the camera on frames flagged away, the feet above the silhouette's lowest row, the
+torso's fronts against a detector's, some mirrored, some missing, a detector's keypoints where the suit's points
+are lost, some with left and right swapped)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -11,7 +13,8 @@ import numpy as np
 
 from tbha_graph.mocap.reconstruct.solve_take import contacts_from_image, rest_pair_distances
 from tbha_graph.mocap.reconstruct.take_jacobian import joint_jacobian, residual_jacobian
-from tbha_graph.mocap.reconstruct.take_model import (DEFAULT_POINT_OFFSETS, HINGES, N_COVER, N_FACING, N_FRAME_RES, N_HANG, N_SIL,
+from tbha_graph.mocap.reconstruct.take_model import (DEFAULT_POINT_OFFSETS, HINGES, KP_PAIRS, N_COVER, N_FACING, N_FRAME_RES, N_HANG,
+                                                     N_KP, N_SIL,
                                                      PER_FRAME, TORSO_PAIRS, SilhouetteField, TakeData, TakeProblem, Weights,
                                                      bone_directions, fronts, pack_initial, point_positions, unit)
 from tbha_graph.mocap.segment.silhouette import distance_outside
@@ -24,7 +27,8 @@ KINDS = {"reprojection": slice(0, 32), "torso": slice(32, 32 + len(TORSO_PAIRS))
          "bottom": slice(N_FRAME_RES + N_SIL - 1, N_FRAME_RES + N_SIL), "cover": slice(N_FRAME_RES + N_SIL, N_FRAME_RES + N_SIL + N_COVER),
          "upright": slice(N_FRAME_RES + N_SIL + N_COVER, N_FRAME_RES + N_SIL + N_COVER + 1),
          "hang": slice(N_FRAME_RES + N_SIL + N_COVER + 1, N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG),
-         "facing": slice(N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG, N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_FACING)}
+         "keypoints": slice(N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG, N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_KP),
+         "facing": slice(N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_KP, N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_KP + N_FACING)}
 
 
 def thin_silhouettes(uv: np.ndarray, scale: float = 0.5, shape=(240, 320), ghost: float = 0.0, width: int = 1) -> SilhouetteField:
@@ -73,8 +77,14 @@ def test_analytic_frame_jacobian_equals_central_differences():
     facing = unit(np.stack(fronts(P), axis=1) + np.random.default_rng(4).normal(scale=0.2, size=(n, 2, 3)))  # a detector's fronts, ~12 deg off
     facing[::5] *= -1.0  # mirrored on some frames: beyond the soft-L1 scale
     facing[3::7, 1] = 0.0  # and no pelvis front on others
+    kp = joints_uv + np.random.default_rng(5).normal(scale=4.0, size=joints_uv.shape)  # a detector's keypoints, 4 px off
+    kp[::3][:, KP_PAIRS.ravel()] = kp[::3][:, KP_PAIRS[:, ::-1].ravel()]  # left and right swapped on some frames
+    kp[1::6, 9] += 60.0  # an outlier: the soft-L1 part
+    kp_weight = np.random.default_rng(6).uniform(0.3, 1.0, size=kp.shape[:2])
+    kp_weight[2::5, 12] = 0.0  # and none
     data = TakeData(uv, weight, L, centre, fps, 0.08, contact, rest_pair_distances(L, 0.08),
-                    silhouette=thin_silhouettes(joints_uv, ghost=60.0), away=np.arange(n) % 2 == 0, up=-nf, facing=facing)
+                    silhouette=thin_silhouettes(joints_uv, ghost=60.0), away=np.arange(n) % 2 == 0, up=-nf, facing=facing,
+                    keypoints=kp, kp_weight=kp_weight)
     prob = TakeProblem(data, bone_directions(P), nf, Weights(sigma_twist=0.2, support_band=-0.03, upright_sin=0.15,
                                                           sigma_hang=0.5),
                        DEFAULT_POINT_OFFSETS.copy(), free_offsets=False)
@@ -83,7 +93,7 @@ def test_analytic_frame_jacobian_equals_central_differences():
     fr[:, 3:] += rng.normal(scale=0.35, size=(n, PER_FRAME - 3))  # bones turned ~20 degrees: hinges bent wrongly
     h = 1e-6
     F = prob.n_frame_res
-    assert F == N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_FACING
+    assert F == N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_KP + N_FACING
     num = np.empty((n, F, PER_FRAME))
     for i in range(PER_FRAME):
         fp, fm = fr.copy(), fr.copy()
@@ -105,6 +115,9 @@ def test_analytic_frame_jacobian_equals_central_differences():
     assert (upright[::2] > 0).mean() > 0.6 and not upright[1::2].any()  # measured 0.93; only where flagged away
     hang = prob.frame_terms(Pj, g)[:, KINDS["hang"]]
     assert (np.abs(hang[::2]).sum(axis=1) > 0).all() and not hang[1::2].any()  # only where flagged away
+    kpr = prob.frame_terms(Pj, g)[:, KINDS["keypoints"]].reshape(n, 16, 2)
+    assert not kpr[weight > 0].any() and (np.abs(kpr[weight == 0]) > 0).mean() > 0.9  # only where the suit's point is lost
+    assert (np.abs(kpr) > prob.w.robust_scale).any()
     fac = prob.frame_terms(Pj, g)[:, KINDS["facing"]]
     assert not fac[3::7, 3:].any() and (np.abs(fac[::5]) > prob.w.robust_scale).any()  # missing hints cost nothing; mirrored ones beyond the scale
     cover = prob.frame_terms(Pj, g)[:, KINDS["cover"]]

@@ -151,6 +151,8 @@ class SolveTakeParams(BaseModel):
     window_overlap: int = Field(30, ge=6, description="frames two neighbouring windows share (cross-faded)")
     cross_seed: bool = Field(True, description="re-solve the best start's depth sides at the other starts' focal lengths, "
                              "to warn when the take does not determine the focal length (never changes the choice)")
+    sigma_kp: float = Field(4.0, gt=0, description="with a keypoints input (a detector's on the same video): each keypoint where "
+                            "the suit's point is lost, pixels (left/right taken as labelled or swapped, whichever fits)")
     sigma_facing: float = Field(0.3, gt=0, description="with tracks that carry a detector's torso facing (detect.mediapipe_pose): "
                                 "each front's unit vector minus the detector's, soft-L1 beyond 2 sd (0.5: about 30 degrees)")
     sigma_sil: float = Field(4.0, gt=0, description="with a silhouette input: a joint or bone midpoint projected outside "
@@ -319,6 +321,37 @@ def first_skeleton(points, tracked, lengths, f, centre, width, height, fps, p: S
     return P, cam
 
 
+def detector_hints(facing: np.ndarray | None = None, keypoints: np.ndarray | None = None,
+                   kp_weight: np.ndarray | None = None) -> dict | None:
+    """A detector's per-frame data for the solver, as :class:`.take_model.TakeData` takes it: ``facing`` ``(n, 2, 3)``
+    the torso's fronts (camera axes), ``keypoints`` ``(n, 16, 2)`` px with ``kp_weight`` ``(n, 16)``; None if none."""
+    out = {}
+    if facing is not None:
+        out["facing"] = np.asarray(facing, dtype=np.float64)
+    if keypoints is not None:
+        out["keypoints"] = np.nan_to_num(np.asarray(keypoints, dtype=np.float64))
+        out["kp_weight"] = np.clip(np.nan_to_num(np.asarray(kp_weight, dtype=np.float64)), 0.0, 1.0)
+    return out or None
+
+
+def detector_keypoints(keypoints: dict, tr) -> tuple[np.ndarray, np.ndarray]:
+    """A detector's ``TRACKS2D`` value (``keypoints`` input) as the solver takes it: points ``(n, 16, 2)`` px and
+    weights ``(n, 16)`` (tracked times its confidence, if it gives one), checked against the suit's tracks ``tr``
+    (:class:`.bundles.tracks.Tracks2D`: same frames and image size, else a NodeError)."""
+    kt = read_tracks(keypoints)
+    if kt.n_frames != tr.n_frames or (kt.width, kt.height) != (tr.width, tr.height):
+        raise NodeError(f"the keypoints have {kt.n_frames} frames of {kt.width}x{kt.height} px, the tracks "
+                        f"{tr.n_frames} of {tr.width}x{tr.height}", hint="connect a detector run on the same video")
+    conf = keypoints.get("confidence") if isinstance(keypoints, dict) else None
+    conf = 1.0 if conf is None else np.nan_to_num(np.asarray(conf, dtype=np.float64))
+    return kt.points, kt.tracked * conf
+
+
+def hints_on(hints: dict | None, rows) -> dict | None:
+    """The detector ``hints`` on the frames ``rows``."""
+    return None if hints is None else {k: v[rows] for k, v in hints.items()}
+
+
 def facing_away(weight: np.ndarray) -> np.ndarray:
     """Frames ``(n,)`` where the head's point is tracked but none of the torso's (weights ``(n, 16)``): the suit's
     patches are on the body's front, so there the torso faces away from the camera."""
@@ -330,11 +363,12 @@ def facing_away(weight: np.ndarray) -> np.ndarray:
 def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: SolveTakeParams, free_offsets: bool,
                  focal_prior=None, contact=None, held_globals: np.ndarray | None = None,
                  silhouette: SilhouetteField | None = None, floor_prior=None,
-                 facing: np.ndarray | None = None) -> tuple[TakeProblem, float]:
+                 hints: dict | None = None) -> tuple[TakeProblem, float]:
     """A :class:`TakeProblem` around joints ``P`` and a floor ``(normal (3,), offset)`` (or a camera whose world
     y is up); contacts detected from ``P`` unless given; the actor's ``silhouette`` on these frames, if any;
     ``floor_prior`` ``(up (3,) camera frame, sd radians)``, the floor's normal as the room shows it, if known;
-    ``facing`` ``(n, 2, 3)`` the torso's fronts as a detector shows them (:attr:`.take_model.TakeData.facing`), if any.
+    ``hints`` a detector's per-frame data on these frames, if any (:func:`detector_hints`: the torso's ``facing``,
+    ``keypoints`` and their ``kp_weight``, as :class:`.take_model.TakeData` takes them).
     Returns the problem and the floor offset."""
     if isinstance(cam_or_floor, Camera):
         nf, d = cam_or_floor.R[:, 1], float(-cam_or_floor.R[:, 1] @ cam_or_floor.t)
@@ -345,9 +379,9 @@ def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: Solve
     contact = np.asarray(contact, dtype=bool)
     data = TakeData(points, weight, lengths, centre, fps, p.ankle_height, contact,
                     rest_pair_distances(lengths, p.ankle_height), silhouette=silhouette,
-                    away=None if silhouette is None else facing_away(weight), up=nf, facing=facing)
+                    away=None if silhouette is None else facing_away(weight), up=nf, **(hints or {}))
     w = Weights(sigma_px=p.sigma_px, sigma_acc=p.sigma_acc, sigma_twist=p.sigma_twist, sigma_acc_torso=p.sigma_acc_torso,
-                sigma_sil=p.sigma_sil, sigma_hang=p.sigma_hang, sigma_facing=p.sigma_facing)
+                sigma_sil=p.sigma_sil, sigma_hang=p.sigma_hang, sigma_facing=p.sigma_facing, sigma_kp=p.sigma_kp)
     offsets = point_offsets_of(p)
     return TakeProblem(data, bone_directions(P), nf, w, offsets, fixed_globals=held_globals, free_offsets=free_offsets,
                        focal_prior=focal_prior, free_lengths=p.free_lengths, floor_prior=floor_prior), d
@@ -355,14 +389,14 @@ def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: Solve
 
 def solve_frames(points, weight, lengths, centre, fps, P0, floor, g_start, p, iterations, free_offsets, focal_prior,
                  side_search: bool, contact: np.ndarray | None = None, hold_globals: bool = False, tol: float = 1e-5,
-                 silhouette: SilhouetteField | None = None, floor_prior=None, facing: np.ndarray | None = None):
+                 silhouette: SilhouetteField | None = None, floor_prior=None, hints: dict | None = None):
     """Whole-take solve from joints ``P0``: LM, then (optionally) the depth-side search and LM again; the globals
     ``g_start`` held when ``hold_globals`` (a window of a long take: camera and floor known); the actor's
-    ``silhouette`` and a detector's torso ``facing`` on these frames, if any. Returns ``(problem, x, cost, normal
+    ``silhouette`` and a detector's ``hints`` on these frames, if any. Returns ``(problem, x, cost, normal
     equations, flips kept)``."""
     def start(P, fl, g):
         prob, _ = make_problem(points, weight, lengths, centre, fps, P, fl, p, free_offsets, focal_prior, contact,
-                               g if hold_globals else None, silhouette, floor_prior, facing)
+                               g if hold_globals else None, silhouette, floor_prior, hints)
         x = pack_initial(P, prob.ref)
         return prob, (x if hold_globals else np.concatenate([g, x]))
 
@@ -395,12 +429,12 @@ def joints_from_directions(root: np.ndarray, dirs: np.ndarray, lengths: np.ndarr
 
 def solve_windows(points, weight, lengths, centre, fps, P0, floor, g, p: SolveTakeParams, contact,
                   window: int, overlap: int, progress=None,
-                  silhouette: SilhouetteField | None = None, facing: np.ndarray | None = None) -> tuple[np.ndarray, int, int]:
+                  silhouette: SilhouetteField | None = None, hints: dict | None = None) -> tuple[np.ndarray, int, int]:
     """The final solve of a long take in overlapping windows of ``window`` frames, camera and floor held
     (globals ``g``, floor ``(normal, offset)``): LM, the depth-side search, LM on each window in turn, started
     from ``P0`` ``(n, 16, 3)`` with its first ``overlap`` frames from the previous window's solution (so depth
     sides carry on), which it replaces over the overlap by a linear cross-fade of root positions and bone
-    directions (the actor's ``silhouette`` and a detector's torso ``facing``, if any, on each window's frames). Memory is that of one window;
+    directions (the actor's ``silhouette`` and a detector's ``hints``, if any, on each window's frames). Memory is that of one window;
     time is linear in the frames. Returns joints ``(n, 16, 3)`` (camera frame, metres), the mirrors kept and the
     number of windows; ``progress`` (optional) wraps the windows' iterable as ``ctx.progress`` does."""
     n = P0.shape[0]
@@ -420,7 +454,7 @@ def solve_windows(points, weight, lengths, centre, fps, P0, floor, g, p: SolveTa
         prob, x, _, _, k = solve_frames(points[rows], weight[rows], lengths, centre, fps, P[rows], floor, g, p,
                                         p.max_iterations, False, None, p.side_search, contact[rows], hold_globals=True,
                                         tol=POSE_TOL, silhouette=None if silhouette is None else silhouette.subset(rows),
-                                        facing=None if facing is None else facing[rows])
+                                        hints=hints_on(hints, rows))
         kept += k
         Pw = prob.solution(x)[4]
         lo = prev_end - a
@@ -479,14 +513,14 @@ def world_frame(P: np.ndarray, nf: np.ndarray, d: float) -> tuple[np.ndarray, np
 def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarray, width: int, height: int,
                       fps: float, p: SolveTakeParams, progress=None, confidence: np.ndarray | None = None,
                       silhouette: SilhouetteField | None = None, lens: LensEstimate | None = None,
-                      facing: np.ndarray | None = None) -> dict:
+                      hints: dict | None = None) -> dict:
     """The whole solve (see the module docstring) on 2D points ``(n, 16, 2)`` px; ``progress`` (optional, as
     ``ctx.progress``: wraps an iterable) shows the starts and the pose windows; ``silhouette`` (optional) the
     actor's outline on every frame; ``lens`` (optional) a focal length found before (``calibrate.vanishing_points``;
     ignored when it holds none): without ``p.focal_px`` the solve starts there and keeps it as a prior (its sd and
     :data:`LENS_SD_FLOOR` combined), and the floor's normal found with it (``up_cam``) as a prior too (sd at least
-    :data:`FLOOR_SD_FLOOR_DEG`); ``facing`` (optional) ``(n, 2, 3)`` the thorax's and the pelvis's fronts (unit, camera
-    axes; zero vectors where unknown) as a detector's own 3D shows them, a prior (``sigma_facing``). Returns a dict with
+    :data:`FLOOR_SD_FLOOR_DEG`); ``hints`` (optional, :func:`detector_hints`) a detector's per-frame data: the thorax's
+    and the pelvis's fronts (``sigma_facing``) and its keypoints where the suit's points are lost (``sigma_kp``). Returns a dict with
     ``joints`` (n, 16, 3) world metres, ``camera`` (:class:`Camera`), ``sides`` (n, 16) int8, ``report``.
 
     BLAS runs on one thread meanwhile: the solver's matrices are small (33 x 33 frame blocks, a band of 99),
@@ -496,13 +530,16 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(limits=1, user_api="blas"):
-        return _solve_take(points, tracked, lengths, width, height, fps, p, progress, confidence, silhouette, lens, facing)
+        return _solve_take(points, tracked, lengths, width, height, fps, p, progress, confidence, silhouette, lens, hints)
 
 
 def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams, progress, confidence, sil,
-                lens=None, facing=None) -> dict:
-    def hint(rows):  # the detector's facing on these frames (None without one)
-        return None if facing is None else np.asarray(facing, dtype=np.float64)[rows]
+                lens=None, hints=None) -> dict:
+    if hints is not None and "keypoints" in hints:  # a detector's keypoints only where no torso patch is seen
+        hints = {**hints, "kp_weight": hints["kp_weight"] * torso_unseen(tracked.astype(np.float64))[:, None]}
+
+    def hint(rows):  # the detector's data on these frames (None without)
+        return hints_on(hints, rows)
 
     t0 = time.perf_counter()
     floor_prior = None
@@ -552,7 +589,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
         g0 = globals_vector(f0, float(-cam.R[:, 1] @ cam.t), False, p.free_lengths)
         prob_k, x_k, cost_k, _, kept = solve_frames(points[sub], weight[sub], lengths, centre, fps / step, P0[sub], cam,
                                                     g0, q, p.calib_iterations, False, focal_prior, p.side_search,
-                                                    contact[sub], floor_prior=floor_prior, facing=hint(sub))
+                                                    contact[sub], floor_prior=floor_prior, hints=hint(sub))
         f_end = float(np.exp(prob_k.globals_of(x_k)[0]))
         sweep.append([round(f0, 1), round(f_end, 1), round(cost_k, 1)])
         if best is None or cost_k < best[0]:
@@ -577,7 +614,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
             prob_k, x_k, cost_k, _, _ = solve_frames(points[sub], weight[sub], lengths, centre, fps / step, P_k,
                                                      (nf_b, d_k), gs, q, p.calib_iterations, False,
                                                      focal_prior, False, contact[sub], floor_prior=floor_prior,
-                                                     facing=hint(sub))
+                                                     hints=hint(sub))
             cross.append([round(f_end, 1), round(float(np.exp(prob_k.globals_of(x_k)[0])), 1), round(cost_k, 1)])
         report["focal_cross_seeded"] = cross
         sweep = sweep + cross
@@ -592,7 +629,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
     gs = np.concatenate([g_sub[:1], [0.0, 0.0, d0], g_sub[4:]])
     prob, x, cost, ne, _ = solve_frames(points[cam_rows], weight[cam_rows], lengths, centre, fps / k_cam, P1[cam_rows],
                                         (nf0, d0), gs, q, p.max_iterations, False, focal_prior, False, contact[cam_rows],
-                                        floor_prior=floor_prior, facing=hint(cam_rows))
+                                        floor_prior=floor_prior, hints=hint(cam_rows))
     kept2 = 0
     # uncertainty of the focal length (log f) from the normal equations, scaled by the fit's residual level
     dof = max(prob.residuals(x).size - x.size, 1)
@@ -609,7 +646,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
             P_s = seat_on_outline(P_s, f_sel, centre, nf_s, d_s, sil, facing_away(weight))
         prob, x, cost, ne, kept2 = solve_frames(points, weight, lengths, centre, fps, P_s, (nf_s, d_s), g_s, p,
                                                 p.max_iterations, False, (f_sel, 1e-4), p.side_search, contact,
-                                                tol=POSE_TOL, silhouette=sil, floor_prior=floor_prior, facing=hint(slice(None)))
+                                                tol=POSE_TOL, silhouette=sil, floor_prior=floor_prior, hints=hint(slice(None)))
     elif not whole:  # the same in windows, camera and floor held
         f_sel, nf_s, d_s, _, P_s = prob.solution(x)
         g_s = np.concatenate([[np.log(f_sel), 0.0, 0.0, d_s], prob.globals_of(x)[4:]])
@@ -620,7 +657,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
                                    (nf_s, d_s), g_s, p, contact, p.window_frames, p.window_overlap, progress, sil,
                                    hint(slice(None)))
         prob, _ = make_problem(points, weight, lengths, centre, fps, P_w, (nf_s, d_s), p, False, None, contact, g_s, sil,
-                               facing=hint(slice(None)))
+                               hints=hint(slice(None)))
         x = pack_initial(P_w, prob.ref)
     f, nf, d, offs, P = prob.solution(x)
     terms = prob.term_costs(x)
@@ -686,7 +723,9 @@ def silhouette_field(silhouette: dict, n_frames: int) -> SilhouetteField:
             "silhouette": optional(SILHOUETTE, "the actor's silhouette per frame (segment.silhouette): joints kept inside "
                                    "it, the lower foot on the floor, the torso facing away where no torso patch is seen"),
             "lens": optional(LENS, "a focal length found before (calibrate.vanishing_points): the start and a prior, "
-                             "unless focal_px is given")},
+                             "unless focal_px is given"),
+            "keypoints": optional(TRACKS2D, "a detector's 2D joints on the same video (detect.mediapipe_pose): where no "
+                                  "torso patch is seen (the actor's back to the camera), each joint's keypoint (sigma_kp)")},
     outputs={
         "motion": MOTION,
         "camera": CAMERA,
@@ -695,7 +734,7 @@ def silhouette_field(silhouette: dict, n_frames: int) -> SilhouetteField:
     },
     params=SolveTakeParams,
 )
-def solve_take(ctx, tracks, body, silhouette=None, lens=None):
+def solve_take(ctx, tracks, body, silhouette=None, lens=None, keypoints=None):
     """Camera (focal, pose above the floor) and motion estimated together from the whole take's 2D tracks."""
     p: SolveTakeParams = ctx.params
     tr = read_tracks(tracks)
@@ -725,8 +764,14 @@ def solve_take(ctx, tracks, body, silhouette=None, lens=None):
                             hint="facing: per frame the thorax's and the pelvis's front, camera axes")
         ctx.log(f"torso facing from the tracks on {100 * (np.linalg.norm(facing[:, 0], axis=-1) > 0.5).mean():.0f} % of frames "
                 "(the detector's own 3D)")
+    kp, kp_weight = None, None
+    if keypoints is not None:
+        kp, kp_weight = detector_keypoints(keypoints, tr)
+        ctx.log(f"detector keypoints on {100 * torso_unseen(tr.tracked.astype(float)).mean():.0f} % of frames "
+                "(no torso patch seen)")
     out = solve_take_arrays(tr.points, tr.tracked, lengths, tr.width, tr.height, float(tr.fps), p,
-                            progress=ctx.progress, confidence=confidence, silhouette=sil, lens=lens, facing=facing)
+                            progress=ctx.progress, confidence=confidence, silhouette=sil, lens=lens,
+                            hints=detector_hints(facing, kp, kp_weight))
     rep = out["report"]
     ctx.log(f"focal {rep['focal_px']:.0f} px (± {rep['focal_sd_pct']:.1f} %), camera {rep['camera_height_m']:.2f} m high, "
             f"{rep['camera_distance_m']:.2f} m away, tilt {rep['camera_tilt_deg']:.1f}°; {rep['solve_seconds']:.1f} s")

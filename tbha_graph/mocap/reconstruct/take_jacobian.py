@@ -18,9 +18,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..skeleton import N_JOINTS, PARENTS
-from .take_model import (ANKLES, AXIS_TRIPLES, HANG_BONES, HINGES, J, N_BONES, N_COVER, N_FACING, N_FRAME_RES, N_SIL, PELVIS_JOINTS,
+from .take_model import (ANKLES, AXIS_TRIPLES, HANG_BONES, HINGES, J, N_BONES, N_COVER, N_FACING, N_FRAME_RES, N_KP, N_SIL, PELVIS_JOINTS,
                          PELVIS_SIDE, PER_FRAME, SIL_PAIRS, THORAX_JOINTS, TORSO_PAIRS, TakeProblem, bottom_residual,
-                         cover_residuals, cover_segments, hang_residual, robust_slope, sil_residuals, torso_unseen, unit,
+                         cover_residuals, cover_segments, hang_residual, keypoint_targets, robust_slope, sil_residuals,
+                         torso_unseen, unit,
                          unseen_points, upright_residual)
 
 _EYE = np.eye(3)
@@ -190,6 +191,13 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
             parts["bottom"] = np.concatenate([bot["dr_dS"], bot["dlogf"][:, None], bot["A"]], axis=1)
             parts["sil_dlogf"] = sil["dlogf"]
             parts["cover_dlogf"] = cov["dlogf"]
+    if d.keypoints is not None:  # before the facing block: robust((uv - keypoint) w / sigma) per joint and axis
+        row = prob.n_frame_res - N_KP - (N_FACING if d.facing is not None else 0)
+        kp = _keypoints(prob, P, g, rows)
+        for j in range(N_JOINTS):
+            out[:, row + 2 * j:row + 2 * j + 2, j] += kp["dP"][:, j]
+        if parts is not None:
+            parts["kp_dlogf"] = kp["dlogf"]
     if d.facing is not None:  # the last block: robust((front - hint) / sigma) per coordinate, thorax then pelvis
         row = prob.n_frame_res - N_FACING
         hint = np.asarray(d.facing, dtype=np.float64)[rows]
@@ -265,6 +273,20 @@ def _bottom(prob: TakeProblem, P: np.ndarray, g: np.ndarray, rows: slice) -> dic
     z = np.maximum(S[:, 2], 1e-3)
     dr = -pc["drho"][:, None] * _pinhole(S, f)[:, 1]  # d v / d S
     return {"dr_dS": dr, "dlogf": -pc["drho"] * f * S[:, 1] / z, "k": k, "A": P[:, ANKLES][np.arange(P.shape[0]), k]}
+
+
+def _keypoints(prob: TakeProblem, P: np.ndarray, g: np.ndarray, rows: slice) -> dict:
+    """The keypoint residuals' (:func:`.take_model.keypoint_residual`) derivatives by their joints ``dP``
+    ``(n, 16, 2, 3)`` and by ``log f`` ``dlogf`` ``(n, N_KP)``: the soft-L1's slope times weight over sigma, times
+    the pinhole's derivative (the left/right choice is piecewise constant)."""
+    w, d = prob.w, prob.d.subset(rows)
+    f = np.exp(g[0])
+    z = np.maximum(P[..., 2:3], 1e-3)
+    uv = f * P[..., :2] / z + d.centre
+    target, wt = keypoint_targets(uv, d)
+    k = wt[..., None] / w.sigma_kp
+    slope = robust_slope((uv - target) * k, w.robust_scale) * k  # (n, 16, 2)
+    return {"dP": slope[..., None] * _pinhole(P, f), "dlogf": (slope * (uv - d.centre)).reshape(P.shape[0], N_KP)}
 
 
 def _silhouette(prob: TakeProblem, P: np.ndarray, g: np.ndarray, rows: slice) -> dict:
@@ -356,6 +378,9 @@ def global_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: dict
     if "sil_dlogf" in parts:  # the silhouette's points scale about the centre too; the support moves with the floor
         Jf[:, N_FRAME_RES:N_FRAME_RES + len(SIL_PAIRS), 0] = parts["sil_dlogf"]
         Jf[:, N_FRAME_RES + N_SIL:N_FRAME_RES + N_SIL + N_COVER, 0] = parts["cover_dlogf"]
+    if "kp_dlogf" in parts:  # the detector's keypoints scale about the centre too
+        row = F - N_KP - (N_FACING if d.facing is not None else 0)
+        Jf[:, row:row + N_KP, 0] = parts["kp_dlogf"]
     # floor: ankle heights h = P_a . nf + d and the slides' horizontal projection
     f1 = unit_jacobian(prob.n_ref + g[1] * prob.f1 + g[2] * prob.f2)[1] @ np.stack([prob.f1, prob.f2], axis=1)  # (3, 2)
     nf, dfl = prob.floor(g)

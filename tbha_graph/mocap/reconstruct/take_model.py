@@ -164,6 +164,11 @@ class TakeData:
     #: ``(n, 2, 3)`` or None: the thorax's and the pelvis's front (unit, camera frame) as a detector's own 3D shows
     #: them (zero vectors where it shows none), a prior on which way the torso faces (:func:`facing_residual`)
     facing: np.ndarray | None = None
+    #: ``(n, 16, 2)`` px or None: a detector's keypoints (joint centres, left and right possibly swapped), used
+    #: where the suit's own points are lost (:func:`keypoint_residual`), with ``kp_weight`` ``(n, 16)``: the
+    #: detector's confidence (0 = none)
+    keypoints: np.ndarray | None = None
+    kp_weight: np.ndarray | None = None
 
     def subset(self, rows, breaks: np.ndarray | None = None) -> "TakeData":
         """The data of the frames ``rows`` (slice or index array), with ``breaks`` for them."""
@@ -171,7 +176,9 @@ class TakeData:
                         self.contact[rows], self.rest_pairs, breaks=breaks,
                         silhouette=None if self.silhouette is None else self.silhouette.subset(rows),
                         away=None if self.away is None else np.asarray(self.away)[rows], up=self.up,
-                        facing=None if self.facing is None else np.asarray(self.facing)[rows])
+                        facing=None if self.facing is None else np.asarray(self.facing)[rows],
+                        keypoints=None if self.keypoints is None else np.asarray(self.keypoints)[rows],
+                        kp_weight=None if self.kp_weight is None else np.asarray(self.kp_weight)[rows])
 
     def acc_mask(self) -> np.ndarray:
         """``(n - 2,)`` 1.0 where the acceleration term of frames (t, t+1, t+2) lies inside one segment."""
@@ -215,6 +222,7 @@ class Weights:
     sigma_hang: float | None = None  # with a silhouette, on frames flagged ``away``: each limb bone's direction minus straight
     #                              down, over this (unit vectors), costs its square: the limbs' patches are unseen there and the
     #                              outline alone let them flail (None: off)
+    sigma_kp: float = 4.0        # a detector's keypoint where the suit's point is lost, pixels (soft-L1 beyond robust_scale)
     sigma_facing: float = 0.5    # with a facing hint (TakeData.facing): each front's unit vector minus the hint's, soft-L1 beyond robust_scale
     sigma_cover: float = 4.0     # with a silhouette: a sample of the outline farther from every projected bone than
     cover_tolerance: float = 0.06  # this fraction of the outline's height (about 0.1 m: the body's half thickness)
@@ -480,6 +488,46 @@ def facing_residual(thorax: np.ndarray, pelvis: np.ndarray, d: TakeData, w: "Wei
     return robust(r / w.sigma_facing, w.robust_scale)
 
 
+#: Left/right joint pairs whose detector keypoints may come swapped (:func:`keypoint_residual` takes the cheaper)
+KP_PAIRS = np.array([(J["left_" + n], J["right_" + n]) for n in ("shoulder", "elbow", "wrist", "hip", "knee", "ankle")])
+#: Keypoint residuals per frame: u, v of every joint
+N_KP = 2 * N_JOINTS
+
+
+def keypoint_targets(uv: np.ndarray, d: TakeData) -> tuple[np.ndarray, np.ndarray]:
+    """Each joint's detector keypoint ``(..., n, 16, 2)`` px and its weight ``(..., n, 16)`` given the model's
+    projected joints ``uv`` ``(..., n, 16, 2)``: per left/right pair (:data:`KP_PAIRS`) the assignment (as
+    labelled or swapped) that costs less; a joint's weight is 0 where the suit's own point is tracked
+    (``d.weight > 0``) and the keypoint's confidence elsewhere."""
+    kp = np.asarray(d.keypoints, dtype=np.float64)
+    cw = np.asarray(d.kp_weight, dtype=np.float64)
+    lost = (np.asarray(d.weight) <= 0).astype(np.float64)
+    a, b = KP_PAIRS[:, 0], KP_PAIRS[:, 1]
+    ua, ub = uv[..., a, :], uv[..., b, :]
+    same = lost[:, a] * cw[:, a] * np.sum((ua - kp[:, a]) ** 2, axis=-1) + lost[:, b] * cw[:, b] * np.sum((ub - kp[:, b]) ** 2, axis=-1)
+    swap = lost[:, a] * cw[:, b] * np.sum((ua - kp[:, b]) ** 2, axis=-1) + lost[:, b] * cw[:, a] * np.sum((ub - kp[:, a]) ** 2, axis=-1)
+    s = swap < same  # (..., n, 6)
+    target = np.broadcast_to(kp, uv.shape).copy()
+    wt = np.broadcast_to(cw, uv.shape[:-1]).copy()
+    target[..., a, :] = np.where(s[..., None], kp[:, b], kp[:, a])
+    target[..., b, :] = np.where(s[..., None], kp[:, a], kp[:, b])
+    wt[..., a] = np.where(s, cw[:, b], cw[:, a])
+    wt[..., b] = np.where(s, cw[:, a], cw[:, b])
+    return target, wt * lost
+
+
+def keypoint_residual(P: np.ndarray, f: float, d: TakeData, w: "Weights") -> np.ndarray:
+    """A detector's keypoints where the suit's points are lost ``(..., n, N_KP)``: each joint centre of ``P``
+    ``(..., n, 16, 3)`` (camera frame) projected at focal ``f``, minus its keypoint (:func:`keypoint_targets`:
+    left and right as labelled or swapped, whichever fits), times its weight, over ``sigma_kp``, soft-L1 beyond
+    ``robust_scale``. With the actor's back to the camera no patch is seen, but a detector still finds the
+    limbs (about 4 px from the truth on the turning renders when its left/right labels are taken either way)."""
+    z = np.maximum(P[..., 2:3], 1e-3)
+    uv = f * P[..., :2] / z + d.centre
+    target, wt = keypoint_targets(uv, d)
+    return robust((uv - target) * (wt[..., None] / w.sigma_kp), w.robust_scale).reshape(P.shape[:-2] + (N_KP,))
+
+
 def seat_on_outline(P: np.ndarray, f: float, centre: np.ndarray, nf: np.ndarray, dfl: float, sil: SilhouetteField,
                     frames: np.ndarray, lift_px: float = -1.0, scales: np.ndarray = np.geomspace(0.6, 1.8, 241)) -> np.ndarray:
     """A start for the frames where the image says little of the body: joints ``P`` ``(n, 16, 3)`` (camera frame)
@@ -564,7 +612,7 @@ class TakeProblem:
         self.floor_prior = None if floor_prior is None else (unit(np.asarray(floor_prior[0], dtype=np.float64)), float(floor_prior[1]))
         self.n_glob = 0 if fixed_globals is not None else self.layout.n_globals
         self.n_frame_res = (N_FRAME_RES + (N_SIL + N_COVER + 1 + N_HANG if data.silhouette is not None else 0)
-                            + (N_FACING if data.facing is not None else 0))
+                            + (N_KP if data.keypoints is not None else 0) + (N_FACING if data.facing is not None else 0))
         self.set_refs(ref, n_ref)
 
     def set_refs(self, ref: np.ndarray, n_ref: np.ndarray) -> None:
@@ -648,6 +696,8 @@ class TakeProblem:
                       np.stack(facing, axis=-1), bottom_residual(P, f, d.centre, nf, dfl, d.silhouette, w)[0][:, None],
                       cover_residuals(P, f, d.centre, d.silhouette, d.lengths, w, mask=torso_unseen(d.weight))[0],
                       upright_residual(P, d, w)[0][:, None], hang_residual(P, d, w)[0]]
+        if d.keypoints is not None:  # a detector's keypoints where the suit's points are lost
+            terms.append(keypoint_residual(P, f, d, w))
         if d.facing is not None:  # the last block: the fronts against the detector's
             terms.append(facing_residual(thorax, pelvis, d, w))
         return np.concatenate(terms, axis=-1)
@@ -706,12 +756,14 @@ class TakeProblem:
         F = self.frame_terms(P, g)
         acc, slide = self.coupled_terms(P, self.floor(g)[0])
         fac = N_FACING if self.d.facing is not None else 0
-        sil = self.n_frame_res - N_FRAME_RES - fac
+        kp = N_KP if self.d.keypoints is not None else 0
+        sil = self.n_frame_res - N_FRAME_RES - fac - kp
         extra = [N_COVER, 1, N_HANG] if sil else [0, 0, 0]  # the cover, upright and hang terms end the silhouette's block
-        k = np.cumsum([0, N_JOINTS * 2, len(TORSO_PAIRS), len(HINGES), 2, 2, 6, sil - sum(extra)] + extra + [fac])
+        k = np.cumsum([0, N_JOINTS * 2, len(TORSO_PAIRS), len(HINGES), 2, 2, 6, sil - sum(extra)] + extra + [kp, fac])
         names = ("reprojection", "torso", "hinge", "below_floor", "contact", "pose", "silhouette", "cover", "upright", "hang",
-                 "facing")
-        out = {nm: 0.5 * float(np.sum(F[:, k[i]:k[i + 1]] ** 2)) for i, nm in enumerate(names)}
+                 "keypoints", "facing")
+        out = {nm: 0.5 * float(np.sum(F[:, k[i]:k[i + 1]] ** 2)) for i, nm in enumerate(names)
+               if nm not in ("keypoints", "facing") or k[i + 1] > k[i]}  # a detector's terms only with its data
         out.update(acceleration=0.5 * float(np.sum(acc ** 2)), slide=0.5 * float(np.sum(slide ** 2)),
                    priors=0.5 * float(np.sum(self.global_terms(g) ** 2)))
         return out
