@@ -69,6 +69,14 @@ twist prior (the pelvis faces where the thorax faces, ``sigma_twist`` about 11 d
    kept (a side view facing left or right, or a turn one way round or the other, gives nearly the same outline;
    each pass's candidates re-optimised for 6 steps; measured on ``bench/labelling.py``'s six takes: mean seq-MPJPE
    170.5 -> 156.0 mm, 186.2 -> 168.7 given the focal length).
+   **A detector's data** (optional): with the ``keypoints`` input (``detect.mediapipe_pose`` on the same video,
+   ``pipelines/suit_mediapipe.yaml``), on frames where no torso patch is seen each joint whose suit point is lost
+   is pulled to the detector's keypoint (:func:`.take_model.keypoint_residual`, ``sigma_kp``; each left/right
+   pair as labelled or swapped, whichever fits: a detector labels a back-turned actor's sides either way);
+   measured with ``bench/solver_sweep.py --repeats 3 --keypoints``: the 16 renders' mean 119.2 -> 101.6 mm.
+   Tracks from ``detect.mediapipe_pose`` (``pipelines/mediapipe.yaml``) carry its torso ``facing``, which the
+   torso is kept near (:func:`.take_model.facing_residual`, ``sigma_facing``; MediaPipe renders' mean PA-MPJPE
+   88.1 -> 77.8 mm).
 5. **World frame.** y up = the floor normal, origin on the floor below the hips on the first frame, z the
    actor's forward on the first frame made horizontal (the actor faces +z in the T-pose).
 
