@@ -3,7 +3,9 @@
 Keys: ``points`` (n_frames, 16, 2) float pixels (top-left origin); ``tracked`` (n_frames, 16) bool (False:
 occluded/lost, ``points`` then holds the tracker's estimate); ``fps`` () Hz; ``width``, ``height`` () int
 pixels; optional ``confidence`` (n_frames, 16), ``frame_index`` (n_frames,) and ``doubtful`` (n_frames,)
-uint8 (:data:`tbha_graph.mocap.track.common.DOUBT` bits). :func:`read_tracks` checks a bundle and returns
+uint8 (:data:`tbha_graph.mocap.track.common.DOUBT` bits); a detector's may carry ``point_offsets`` (16, 2) metres
+(each keypoint's offset from its joint centre) and ``facing`` (n_frames, 2, 3) (the thorax's and the pelvis's
+fronts, unit, camera axes, zero where unknown), both read by ``reconstruct.solve_take``. :func:`read_tracks` checks a bundle and returns
 it typed (:class:`Tracks`).
 """
 from __future__ import annotations

@@ -594,7 +594,8 @@ class TakeProblem:
 
     Residual vector: per-frame block ``(n, n_frame_res)`` (frame-major; :data:`N_FRAME_RES`, plus the silhouette's
     :data:`N_SIL`, the cover's :data:`N_COVER`, the upright spine's 1 and the hanging limbs' :data:`N_HANG` at its
-    end when the data has a silhouette), then accelerations
+    end when the data has a silhouette, then a detector's keypoints :data:`N_KP` and torso facing :data:`N_FACING`
+    when the data has them), then accelerations
     ``(n - 2, 16 * 3)``, planted-ankle slides ``(n, 2)``, then global priors (point offsets, a known focal).
     """
 
