@@ -365,12 +365,10 @@ def test_facing_hint_turns_a_torso_seen_at_four_points(truth):
     true_fronts = np.stack(fronts(P), axis=1)
 
     def solve(hint):
-        prob, d = problem(truth, P, uv, centre, L, Weights(sigma_px=2.0))
+        prob, d = problem(truth, P, uv, centre, L, Weights(sigma_px=2.0), **({} if hint is None else {"facing": hint}))
         seen = [J[n] for n in ("left_shoulder", "right_shoulder", "left_hip", "right_hip", "head")]
         prob.d.weight[:] = 0.0
         prob.d.weight[:, seen] = 1.0
-        prob.d.facing = hint
-        prob = TakeProblem(prob.d, bone_directions(P), prob.n_ref, prob.w, DEFAULT_POINT_OFFSETS.copy(), free_offsets=False)
         x = np.concatenate([globals_vector(700.0, d, False), pack_initial(P, prob.ref)])
         with threadpool_limits(limits=1, user_api="blas"):  # as the node solves: small matrices (2 s; 55 s with threads on a busy machine)
             x = levenberg_marquardt(prob, x, 30)[0]
