@@ -201,7 +201,7 @@ def off_body(tracks: dict, truth: dict, placed_only: bool = False) -> tuple[int,
     return count, total
 
 
-def true_camera_seq_mpjpe(sets: dict, vars: dict, truth: dict, keypoints: bool = False) -> float:
+def true_camera_seq_mpjpe(sets: dict, vars: dict, truth: dict, keypoints: bool = True) -> float:
     """seq-MPJPE (mm) of the same capture given the render's camera: with a ``calibrate`` node (the seed's
     chain) the true camera replaces the T-pose calibration (``calibrate.known``); with a solver that
     estimates the camera itself (``reconstruct.solve_take``), its ``focal_px`` var is set to the true focal
@@ -241,23 +241,18 @@ def true_camera_seq_mpjpe(sets: dict, vars: dict, truth: dict, keypoints: bool =
     return float(np.nanmean(m.joint_distances(aligned, gt))) * 1000.0
 
 
-#: The pipeline whose nodes :func:`render_decl` adds with ``keypoints``: MediaPipe Pose's keypoints where no
-#: torso patch is seen (one definition of that wiring)
-KEYPOINTS_PIPELINE = ROOT / "pipelines" / "suit_mediapipe.yaml"
-
-
-def render_decl(keypoints: bool = False):
-    """``pipelines/evaluate_render.yaml`` read (a ``PipelineDecl`` for ``load_graph(..., decl=...)``), with the
-    nodes of :data:`KEYPOINTS_PIPELINE` merged in when ``keypoints`` (needs the mediapipe extra)."""
+def render_decl(keypoints: bool = True):
+    """``pipelines/evaluate_render.yaml`` read (a ``PipelineDecl`` for ``load_graph(..., decl=...)``): as the default
+    pipeline, with MediaPipe's keypoints where no torso patch is seen (its node ``detect``; the mediapipe extra),
+    or without them (``keypoints`` False: ``detect.frames: none``), to compare."""
     from tbha_graph.core.errors import Location, PipelineErrors
     from tbha_graph.core.spec import merge_node_override, read_pipeline
-    from tbha_graph.core.yamlfile import load_yaml
 
-    decl = read_pipeline(ROOT / "pipelines" / "evaluate_render.yaml")
-    if keypoints:
-        data, errors = load_yaml(KEYPOINTS_PIPELINE)
-        for nid, body in ({} if data is None else data.get("nodes", {})).items():
-            merge_node_override(decl, str(nid), body, Location(str(KEYPOINTS_PIPELINE), 1, 1), KEYPOINTS_PIPELINE.parent, errors)
+    path = ROOT / "pipelines" / "evaluate_render.yaml"
+    decl = read_pipeline(path)
+    if not keypoints:
+        errors: list = []
+        merge_node_override(decl, "detect", {"params": {"frames": "none"}}, Location(str(path), 1, 1), path.parent, errors)
         if errors:
             raise PipelineErrors(errors)
     return decl
@@ -272,7 +267,7 @@ def take_config(take: str, suit: str) -> tuple[dict, dict]:
     return sets, {"bvh": str(ROOT / "data" / "mocap" / "cmu" / clip)}
 
 
-def run_take(take: str, suit: str, keep: Path | None, keypoints: bool = False) -> dict:
+def run_take(take: str, suit: str, keep: Path | None, keypoints: bool = True) -> dict:
     from tbha_graph.core.runner import load_graph, run_graph
     from tbha_graph.mocap.evaluate import measures as m
     from tbha_graph.mocap.suit import load_suit
@@ -315,8 +310,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--suits", nargs="*", default=list(SUITS), choices=list(SUITS))
     ap.add_argument("--keep", type=Path, default=None, help="write each take's run folder under this folder")
     ap.add_argument("--verbose", action="store_true", help="also print the frames with identity errors")
-    ap.add_argument("--keypoints", action="store_true", help="capture with pipelines/suit_mediapipe.yaml's additions: "
-                    "MediaPipe's keypoints where no torso patch is seen (needs the mediapipe extra)")
+    ap.add_argument("--no-keypoints", dest="keypoints", action="store_false", help="capture without MediaPipe's "
+                    "keypoints where no torso patch is seen (default.yaml's node detect off), to compare")
     a = ap.parse_args(argv)
     if a.takes is None:
         a.takes = list(HELD_OUT) if a.held_out else list(TAKES)

