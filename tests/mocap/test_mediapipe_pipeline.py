@@ -150,6 +150,7 @@ def test_default_pipeline_leaves_a_take_without_turns_as_it_was(tmp_path):
                     outputs=["reconstruct"], cache=False)
     assert run.output("detect.report")["frames_run"] == 0
     assert "keypoints" not in run.output("reconstruct.report")["cost"]
+    assert "keypoint_frames" not in run.output("reconstruct.report")
     np.testing.assert_array_equal(run.output("reconstruct.motion")["joints"], off.output("reconstruct.motion")["joints"])
 
 

@@ -562,6 +562,8 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
     if p.confidence_power > 0 and confidence is not None:
         weight = weight * np.clip(np.nan_to_num(np.asarray(confidence, dtype=np.float64)), 0.0, 1.0) ** p.confidence_power
     report: dict = {"frames": n}
+    if hints is not None and "kp_weight" in hints:  # frames placed by a detector's keypoints (no torso patch seen)
+        report["keypoint_frames"] = int((hints["kp_weight"] > 0).any(axis=1).sum())
     warnings_out: list[str] = []
     # for each starting focal length (or the known one): a first skeleton; on a frame subsample spread over
     # the take, LM, the depth-side search and LM again; then every frame from that solution (interpolated),
