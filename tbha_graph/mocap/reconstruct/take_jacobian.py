@@ -250,15 +250,20 @@ def _cover(prob: TakeProblem, P: np.ndarray, g: np.ndarray, rows: slice) -> dict
     ends' joint weights."""
     w, d = prob.w, prob.d
     f = np.exp(g[0])
-    _, pc = cover_residuals(P, f, d.centre, d.silhouette, d.lengths, w, rows, mask=torso_unseen(d.weight[rows]))
-    s, t, k = pc["s"], pc["t"], pc["drho"][..., None] * pc["g"]  # k: d r / d (nearest point), (n, K, 2)
-    pick = lambda v: np.take_along_axis(v, s[..., None], axis=1)  # noqa: E731 - (n, 15, c) -> (n, K, c)
-    ka, kb = (1.0 - t)[..., None] * k, t[..., None] * k
-    GA = (ka[..., None, :] @ _pinhole(pick(pc["A"]), f))[..., 0, :]  # (n, K, 3)
-    GB = (kb[..., None, :] @ _pinhole(pick(pc["B"]), f))[..., 0, :]
-    a, b = cover_segments(d.lengths)
-    dP = np.einsum("nkj,nkc->nkjc", a[s], GA) + np.einsum("nkj,nkc->nkjc", b[s], GB)
-    dlogf = np.sum(ka * (pick(pc["ua"]) - d.centre) + kb * (pick(pc["ub"]) - d.centre), axis=-1)
+    mask = torso_unseen(d.weight[rows])
+    _, pc = cover_residuals(P, f, d.centre, d.silhouette, d.lengths, w, rows, mask=mask)
+    n = P.shape[0]
+    dP, dlogf = np.zeros((n, N_COVER, N_JOINTS, 3)), np.zeros((n, N_COVER))
+    on = np.flatnonzero(mask)  # zero elsewhere: the term applies where the torso is unseen only
+    if len(on):
+        s, t, k = pc["s"][on], pc["t"][on], pc["drho"][on][..., None] * pc["g"][on]  # k: d r / d (nearest point), (m, K, 2)
+        pick = lambda v: np.take_along_axis(v[on], s[..., None], axis=1)  # noqa: E731 - (n, 15, c) -> (m, K, c)
+        ka, kb = (1.0 - t)[..., None] * k, t[..., None] * k
+        GA = (ka[..., None, :] @ _pinhole(pick(pc["A"]), f))[..., 0, :]  # (m, K, 3)
+        GB = (kb[..., None, :] @ _pinhole(pick(pc["B"]), f))[..., 0, :]
+        a, b = cover_segments(d.lengths)
+        dP[on] = np.einsum("nkj,nkc->nkjc", a[s], GA) + np.einsum("nkj,nkc->nkjc", b[s], GB)
+        dlogf[on] = np.sum(ka * (pick(pc["ua"]) - d.centre) + kb * (pick(pc["ub"]) - d.centre), axis=-1)
     return {"dP": dP, "dlogf": dlogf}
 
 

@@ -421,23 +421,28 @@ def cover_residuals(P: np.ndarray, f: float, centre: np.ndarray, sil: Silhouette
     A, B = np.einsum("sj,njc->nsc", a, P), np.einsum("sj,njc->nsc", b, P)
     ua = f * A[..., :2] / np.maximum(A[..., 2:3], 1e-3) + centre
     ub = f * B[..., :2] / np.maximum(B[..., 2:3], 1e-3) + centre
-    q, height = sil.outline(rows)
-    ok = np.isfinite(q).all(axis=-1)  # (n, K)
-    q = np.where(ok[..., None], q, 0.0)
-    ab = (ub - ua)[:, None]  # (n, 1, S, 2)
-    qa = q[:, :, None] - ua[:, None]  # (n, K, S, 2)
-    t = np.clip(np.sum(qa * ab, axis=-1) / np.maximum(np.sum(ab * ab, axis=-1), 1e-9), 0.0, 1.0)
-    diff = ua[:, None] + t[..., None] * ab - q[:, :, None]  # nearest point minus sample
-    dist = np.linalg.norm(diff, axis=-1)  # (n, K, S)
-    s = np.argmin(dist, axis=-1)
-    pick = lambda v: np.take_along_axis(v, s[..., None] if v.ndim == 3 else s[..., None, None], axis=2)[:, :, 0]  # noqa: E731
-    d, ts, g = pick(dist), pick(t), pick(diff)
-    g = g / np.maximum(d, 1e-9)[..., None]
-    e = np.where(ok, np.maximum(d - w.cover_tolerance * height[:, None], 0.0), 0.0) / w.sigma_cover
-    if mask is not None:
-        e = e * mask[:, None]
-    r = robust(e, w.robust_scale)
-    drho = np.where(e <= 0.0, 0.0, robust_slope(e, w.robust_scale)) / w.sigma_cover
+    n = P.shape[0]
+    r, drho, ts = np.zeros((n, N_COVER)), np.zeros((n, N_COVER)), np.zeros((n, N_COVER))
+    s, g = np.zeros((n, N_COVER), dtype=np.intp), np.zeros((n, N_COVER, 2))
+    on = np.arange(n) if mask is None else np.flatnonzero(mask)  # the nearest-segment search only where it applies
+    if len(on):
+        q, height = sil.outline(np.arange(len(np.asarray(sil.index)))[rows][on])
+        ok = np.isfinite(q).all(axis=-1)  # (m, K)
+        q = np.where(ok[..., None], q, 0.0)
+        ab = (ub[on] - ua[on])[:, None]  # (m, 1, S, 2)
+        qa = q[:, :, None] - ua[on][:, None]  # (m, K, S, 2)
+        t = np.clip(np.sum(qa * ab, axis=-1) / np.maximum(np.sum(ab * ab, axis=-1), 1e-9), 0.0, 1.0)
+        diff = ua[on][:, None] + t[..., None] * ab - q[:, :, None]  # nearest point minus sample
+        dist = np.linalg.norm(diff, axis=-1)  # (m, K, S)
+        s[on] = np.argmin(dist, axis=-1)
+        pick = lambda v: np.take_along_axis(v, s[on][..., None] if v.ndim == 3 else s[on][..., None, None], axis=2)[:, :, 0]  # noqa: E731
+        d, ts[on], g_on = pick(dist), pick(t), pick(diff)
+        g[on] = g_on / np.maximum(d, 1e-9)[..., None]
+        e = np.where(ok, np.maximum(d - w.cover_tolerance * height[:, None], 0.0), 0.0) / w.sigma_cover
+        if mask is not None:
+            e = e * np.asarray(mask, dtype=np.float64)[on][:, None]
+        r[on] = robust(e, w.robust_scale)
+        drho[on] = np.where(e <= 0.0, 0.0, robust_slope(e, w.robust_scale)) / w.sigma_cover
     return r, {"s": s, "t": ts, "g": g, "drho": drho, "A": A, "B": B, "ua": ua, "ub": ub}
 
 
