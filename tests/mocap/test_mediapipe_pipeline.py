@@ -181,3 +181,23 @@ def test_without_mediapipe_default_pipeline_warns_and_goes_on(monkeypatch):
 
         with pytest.raises(NodeError, match="not installed"):
             mediapipe_pose.fn(strict, _sample_clip(30), _suit_tracks(30, slice(10, 20)))
+
+
+def test_torso_facing_takes_its_depth_from_the_image_where_they_disagree():
+    """MediaPipe's world landmarks sometimes have a torso's depth backwards; the image's winding of the
+    shoulders' and hips' quad says which side of the torso the camera is on, and the front follows it."""
+    from tbha_graph.mocap.detect.mediapipe_pose import torso_facing
+    from tbha_graph.mocap.io.mediapipe_world import MEDIAPIPE_TO_WORLD
+
+    with np.load(SAMPLE / "ground_truth.npz") as z:
+        cam, uv = z["joints3d_cam"][:30].copy(), z["joints2d"][:30]
+    turned = cam.copy()  # frames 0-9: the 3D body turned half a turn about the vertical through its chest (its back
+    c = turned[:10, JOINT_INDEX["chest"]][:, None]  # to the camera) while the image shows its front
+    turned[:10, :, [0, 2]] = 2.0 * c[..., [0, 2]] - turned[:10, :, [0, 2]]
+    motion = {"joints": turned @ MEDIAPIPE_TO_WORLD.T, "tracked": np.ones((30, 16), dtype=bool)}
+    blind = torso_facing(motion)
+    assert (blind[:10, :, 2] > 0.5).all() and (blind[10:, :, 2] < -0.5).all()  # facing away on the mirrored frames
+    fixed = torso_facing(motion, uv)
+    assert (fixed[..., 2] < -0.5).all()  # the sample faces the camera throughout its opening
+    np.testing.assert_allclose(fixed[..., :2], blind[..., :2])  # only the front's depth component changes
+    np.testing.assert_allclose(fixed[10:], blind[10:])
