@@ -241,20 +241,25 @@ def true_camera_seq_mpjpe(sets: dict, vars: dict, truth: dict, keypoints: bool =
     return float(np.nanmean(m.joint_distances(aligned, gt))) * 1000.0
 
 
-def render_decl(keypoints: bool = True):
+def render_decl(keypoints: bool = True, sets: dict | None = None):
     """``pipelines/evaluate_render.yaml`` read (a ``PipelineDecl`` for ``load_graph(..., decl=...)``): as the default
     pipeline, with MediaPipe's keypoints where no torso patch is seen (its node ``detect``; the mediapipe extra),
-    or without them (``keypoints`` False: ``detect.frames: none``), to compare."""
+    or without them (``keypoints`` False: ``detect.frames: none``), to compare; ``sets`` ``{"node.param": value}``
+    overrides params as ``--set`` does."""
     from tbha_graph.core.errors import Location, PipelineErrors
     from tbha_graph.core.spec import merge_node_override, read_pipeline
 
     path = ROOT / "pipelines" / "evaluate_render.yaml"
     decl = read_pipeline(path)
-    if not keypoints:
-        errors: list = []
-        merge_node_override(decl, "detect", {"params": {"frames": "none"}}, Location(str(path), 1, 1), path.parent, errors)
-        if errors:
-            raise PipelineErrors(errors)
+    by_node: dict = {}
+    for key, value in {**({} if keypoints else {"detect.frames": "none"}), **(sets or {})}.items():
+        nid, _, param = key.partition(".")
+        by_node.setdefault(nid, {})[param] = value
+    errors: list = []
+    for nid, params in by_node.items():
+        merge_node_override(decl, nid, {"params": params}, Location(str(path), 1, 1), path.parent, errors)
+    if errors:
+        raise PipelineErrors(errors)
     return decl
 
 

@@ -23,6 +23,7 @@ setting is better than another when its mean is, by more than their spreads.
     python bench/solver_sweep.py --focal take                     # no room lines: the focal length from the take
     python bench/solver_sweep.py --repeats 3                      # each take 3 times (twice with 0.05 px noise)
     python bench/solver_sweep.py --no-keypoints                   # without MediaPipe's keypoints (default.yaml's detect off)
+    python bench/solver_sweep.py --node-set detect.threshold=0.3  # another node's param (here MediaPipe's visibility threshold)
 """
 from __future__ import annotations
 
@@ -50,13 +51,14 @@ from tbha_graph.mocap.reconstruct import solve_take as st  # noqa: E402
 TURNING = [(take, suit) for take in list(labelling.TAKES) + list(labelling.HELD_OUT) for suit in labelling.SUITS]
 
 
-def take_graph(take, keypoints: bool = True):
+def take_graph(take, keypoints: bool = True, node_sets: dict | None = None):
     """The default pipeline's graph for ``take`` (``"sample"``, a solver render's name, or a ``(take, suit)``
     turning take) and the output holding its ground truth; without ``keypoints``, its node ``detect`` (MediaPipe's
-    keypoints where no torso patch is seen) off."""
+    keypoints where no torso patch is seen) off; ``node_sets`` ``{"node.param": value}`` as ``--set``."""
     if take == "sample":
-        return load_graph(ROOT / "pipelines" / "default.yaml", sets={} if keypoints else {"detect.frames": "none"}), "truth.truth"
-    decl = labelling.render_decl(keypoints)
+        return load_graph(ROOT / "pipelines" / "default.yaml",
+                          sets={**({} if keypoints else {"detect.frames": "none"}), **(node_sets or {})}), "truth.truth"
+    decl = labelling.render_decl(keypoints, node_sets)
     if isinstance(take, str):
         return render_graph(next(t for t in SOLVER_TAKES if t[0] == take), decl=decl), "render.ground_truth"
     sets, vars = labelling.take_config(*take)
@@ -64,12 +66,12 @@ def take_graph(take, keypoints: bool = True):
 
 
 def solve(take, params: dict, focal: str, cache: Cache, repeats: int = 1, jitter_px: float = 0.05,
-          keypoints: bool = True) -> list[float]:
+          keypoints: bool = True, node_sets: dict | None = None) -> list[float]:
     """Seq-MPJPE (mm) of the solver on ``take`` with ``SolveTakeParams(**params)``, one per repeat (the first on
     the tracks as they are, repeat r >= 1 on the tracked points plus Gaussian noise of ``jitter_px`` pixels, seed
     r); ``focal``: ``room`` (the ``lens`` node's estimate, as the default pipeline), ``given`` (the truth's) or
     ``take`` (no lens); ``keypoints``: with MediaPipe's keypoints where no torso patch is seen, as the default pipeline."""
-    graph, truth_ref = take_graph(take, keypoints)
+    graph, truth_ref = take_graph(take, keypoints, node_sets)
     run = run_graph(graph, outputs=["track", "silhouette", "lens", "detect", truth_ref.split(".")[0]],
                     cache=cache)
     truth = run.output(truth_ref)
@@ -98,6 +100,8 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n")[0])
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                     help="a reconstruct.solve_take param (YAML value), repeatable")
+    ap.add_argument("--node-set", action="append", default=[], metavar="NODE.PARAM=VALUE",
+                    help="another node's param (YAML value) in the pipeline that makes the solver's inputs, e.g. detect.threshold=0.3")
     ap.add_argument("--focal", choices=("room", "given", "take"), default="room")
     ap.add_argument("--repeats", type=int, default=1, help="solves per take: the tracks as they are, then with noise")
     ap.add_argument("--jitter-px", type=float, default=0.05, help="sd of the noise added to the tracks in repeats 2..K, pixels")
@@ -116,11 +120,17 @@ def main(argv: list[str] | None = None) -> None:
         st.SolveTakeParams(**params)
     except ValueError as e:  # pydantic's ValidationError
         ap.error(f"--set: {e}")
+    node_sets = {}
+    for item in args.node_set:
+        key, sep, value = item.partition("=")
+        if not sep or "." not in key:
+            ap.error(f"--node-set {item!r}: expected NODE.PARAM=VALUE")
+        node_sets[key] = yaml.safe_load(value)
     cache = Cache(Path.home() / ".cache" / "tbha-graph")
     mm = {}
     for take in ["sample"] + [t[0] for t in SOLVER_TAKES] + TURNING:
         name = take if isinstance(take, str) else f"{take[0]}_{take[1]}"
-        mm[name] = solve(take, params, args.focal, cache, args.repeats, args.jitter_px, args.keypoints)
+        mm[name] = solve(take, params, args.focal, cache, args.repeats, args.jitter_px, args.keypoints, node_sets)
         print(f"{name}_mpjpe_mm={np.mean(mm[name]):.1f}", flush=True)
         if args.repeats > 1:
             print(f"{name}_mpjpe_mm_min={min(mm[name]):.1f}\n{name}_mpjpe_mm_max={max(mm[name]):.1f}", flush=True)
