@@ -73,7 +73,8 @@ twist prior (the pelvis faces where the thorax faces, ``sigma_twist`` about 11 d
    as ``pipelines/default.yaml`` wires it), on frames where no torso patch is seen each joint whose suit point is lost
    is pulled to the detector's keypoint (:func:`.take_model.keypoint_residual`, ``sigma_kp``; each left/right
    pair as labelled or swapped, whichever fits: a detector labels a back-turned actor's sides either way);
-   measured with ``bench/solver_sweep.py --repeats 3`` against ``--no-keypoints``: the 16 renders' mean 119.2 -> 101.6 mm.
+   measured with ``bench/solver_sweep.py --repeats 3`` against ``--no-keypoints``: the 16 renders' mean 116.5 -> 101.5 mm
+   (Pose run only where no torso patch is seen, as default.yaml does; round 8, on every frame: 119.2 -> 101.6).
    Tracks from ``detect.mediapipe_pose`` (``pipelines/mediapipe.yaml``) carry its torso ``facing``, which the
    torso is kept near (:func:`.take_model.facing_residual`, ``sigma_facing``; MediaPipe renders' mean PA-MPJPE
    88.1 -> 77.8 mm).
@@ -162,7 +163,8 @@ class SolveTakeParams(BaseModel):
     sigma_kp: float = Field(4.0, gt=0, description="with a keypoints input (a detector's on the same video): each keypoint where "
                             "the suit's point is lost, pixels (left/right taken as labelled or swapped, whichever fits); "
                             "only on frames where no torso patch is seen (on every lost point walk 131_01 went 107 -> 208 mm); 16 renders x 3 "
-                            "draws: 101.6 mm mean at 4, 102.7 at 2.5, 106.5 at 6, 119.2 without")
+                            "draws (Pose on every frame, another numpy build): 101.6 mm mean at 4, 102.7 at 2.5, 106.5 at 6, "
+                            "119.2 without; as default.yaml runs it: 101.5 at 4, 116.5 without")
     sigma_facing: float = Field(0.3, gt=0, description="with tracks that carry a detector's torso facing (detect.mediapipe_pose): "
                                 "each front's unit vector minus the detector's, soft-L1 beyond 2 sd (0.3: about 17 degrees); "
                                 "four MediaPipe renders x 3 draws, mean PA-MPJPE: 88.1 mm without, 78.5 / 77.8 / 83.7 at 0.2 / 0.3 / 0.5")
