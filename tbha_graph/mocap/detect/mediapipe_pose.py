@@ -233,6 +233,13 @@ def prefetched_rgb_frames(video: VideoClip, depth: int) -> Iterator[tuple[int, n
         thread.join(timeout=5.0)
 
 
+def open_pose(mp_pose, p: MediaPipePoseParams, static_image_mode: bool):
+    """A MediaPipe Pose (``mediapipe.solutions.pose``, model complexity 1, no segmentation) with ``p``'s settings."""
+    return mp_pose.Pose(static_image_mode=static_image_mode, model_complexity=1, smooth_landmarks=p.smooth_landmarks,
+                        enable_segmentation=False, min_detection_confidence=p.min_detection_confidence,
+                        min_tracking_confidence=p.min_tracking_confidence)
+
+
 def detect_landmarks(ctx, video: VideoClip, p: MediaPipePoseParams,
                      runs: list[tuple[int, int]] | None = None) -> tuple[MediaPipeTake, dict]:
     """Run Pose over the clip's frames (or only over ``runs``, ``[a, b)`` frame ranges of the clip, each with a
@@ -244,11 +251,6 @@ def detect_landmarks(ctx, video: VideoClip, p: MediaPipePoseParams,
     world = np.full((n, MEDIAPIPE_POSE.size, 4), np.nan)
     detect_s = 0.0
     t0 = time.perf_counter()
-
-    def pose_model():
-        return mp_pose.Pose(static_image_mode=p.static_image_mode, model_complexity=1, smooth_landmarks=p.smooth_landmarks,
-                            enable_segmentation=False, min_detection_confidence=p.min_detection_confidence,
-                            min_tracking_confidence=p.min_tracking_confidence)
 
     def detect(pose, k: int, rgb: np.ndarray) -> None:
         nonlocal detect_s
@@ -263,7 +265,7 @@ def detect_landmarks(ctx, video: VideoClip, p: MediaPipePoseParams,
     backfilled = 0
     if runs is None:
         ran = n
-        with pose_model() as pose:
+        with open_pose(mp_pose, p, p.static_image_mode) as pose:
             for index, rgb in ctx.progress(prefetched_rgb_frames(video, p.prefetch), total=n, desc="mediapipe pose"):
                 detect(pose, index - video.start, rgb)
         if p.backfill and not p.static_image_mode:
@@ -272,7 +274,7 @@ def detect_landmarks(ctx, video: VideoClip, p: MediaPipePoseParams,
         ran = sum(b - a for a, b in runs)
         bar = iter(ctx.progress(range(ran), total=ran, desc="mediapipe pose"))
         for a, b in runs:
-            with pose_model() as pose:
+            with open_pose(mp_pose, p, p.static_image_mode) as pose:
                 for index, rgb in prefetched_rgb_frames_range(video, video.start + a, video.start + b):
                     detect(pose, index - video.start, rgb)
                     next(bar, None)
@@ -338,9 +340,7 @@ def _backfill(mp_pose, video: VideoClip, p: "MediaPipePoseParams", image: np.nda
     filled = 0
     for a, b in _undetected_runs(image):
         frames = [rgb for _, rgb in prefetched_rgb_frames_range(video, video.start + a, video.start + b + 1)]
-        with mp_pose.Pose(static_image_mode=False, model_complexity=1, smooth_landmarks=p.smooth_landmarks,
-                          enable_segmentation=False, min_detection_confidence=p.min_detection_confidence,
-                          min_tracking_confidence=p.min_tracking_confidence) as pose:
+        with open_pose(mp_pose, p, static_image_mode=False) as pose:
             for k in range(len(frames) - 1, -1, -1):
                 res = pose.process(frames[k])
                 if res.pose_landmarks is None:

@@ -429,15 +429,16 @@ def cover_residuals(P: np.ndarray, f: float, centre: np.ndarray, sil: Silhouette
         q, height = sil.outline(np.arange(len(np.asarray(sil.index)))[rows][on])
         ok = np.isfinite(q).all(axis=-1)  # (m, K)
         q = np.where(ok[..., None], q, 0.0)
-        ab = (ub[on] - ua[on])[:, None]  # (m, 1, S, 2)
-        qa = q[:, :, None] - ua[on][:, None]  # (m, K, S, 2)
+        a_on = ua[on][:, None]  # (m, 1, S, 2)
+        ab = ub[on][:, None] - a_on
+        qa = q[:, :, None] - a_on  # (m, K, S, 2)
         t = np.clip(np.sum(qa * ab, axis=-1) / np.maximum(np.sum(ab * ab, axis=-1), 1e-9), 0.0, 1.0)
-        diff = ua[on][:, None] + t[..., None] * ab - q[:, :, None]  # nearest point minus sample
+        diff = a_on + t[..., None] * ab - q[:, :, None]  # nearest point minus sample
         dist = np.linalg.norm(diff, axis=-1)  # (m, K, S)
-        s[on] = np.argmin(dist, axis=-1)
-        pick = lambda v: np.take_along_axis(v, s[on][..., None] if v.ndim == 3 else s[on][..., None, None], axis=2)[:, :, 0]  # noqa: E731
-        d, ts[on], g_on = pick(dist), pick(t), pick(diff)
-        g[on] = g_on / np.maximum(d, 1e-9)[..., None]
+        s_on = np.argmin(dist, axis=-1)
+        pick = lambda v: np.take_along_axis(v, s_on[..., None] if v.ndim == 3 else s_on[..., None, None], axis=2)[:, :, 0]  # noqa: E731
+        d, s[on], ts[on] = pick(dist), s_on, pick(t)
+        g[on] = pick(diff) / np.maximum(d, 1e-9)[..., None]
         e = np.where(ok, np.maximum(d - w.cover_tolerance * height[:, None], 0.0), 0.0) / w.sigma_cover
         if mask is not None:
             e = e * np.asarray(mask, dtype=np.float64)[on][:, None]
