@@ -60,13 +60,13 @@ def world_joints(world: np.ndarray) -> np.ndarray:
     return joints16_from_landmarks(xyz, np.nan_to_num(world[..., 3]), MEDIAPIPE_POSE)[0]
 
 
-def score(name: str, sets: dict) -> dict:
+def score(name: str, sets: dict, jobs: int = 1) -> dict:
     folder = render(name)
     vars = {"video": str(folder / "sample.mp4"), "ground_truth": str(folder / "ground_truth.npz")}
     graph = load_graph(ROOT / "pipelines" / "mediapipe.yaml", sets=sets, vars=vars)
     with tempfile.TemporaryDirectory(prefix="tbha-mp-") as tmp:
         t0 = time.perf_counter()
-        run = run_graph(graph, out_dir=Path(tmp) / "run", cache=False)
+        run = run_graph(graph, out_dir=Path(tmp) / "run", cache=False, jobs=jobs)
         wall = time.perf_counter() - t0
         manifest = json.loads((Path(tmp) / "run" / "manifest.json").read_text())
     nodes = manifest.get("nodes", {})
@@ -104,6 +104,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--takes", default=",".join(EVAL), help="comma-separated names of bench/mediapipe_renders.py's EVAL")
     ap.add_argument("--set", action="append", default=[], metavar="NODE.PARAM=VALUE", help="passed to the pipeline")
+    ap.add_argument("--jobs", type=int, default=1, help="nodes run at once (tbha-run --jobs): 2 overlaps the room's lines with detection")
     a = ap.parse_args()
     sets = {}
     for s in a.set:
@@ -111,7 +112,7 @@ def main() -> None:
         sets[k] = yaml.safe_load(v)
     for name in a.takes.split(","):
         try:
-            r = score(name, sets)
+            r = score(name, sets, a.jobs)
         except Exception as e:  # noqa: BLE001 - one take failing is a result too; the others still run
             print(f"take={name} error={type(e).__name__}: {str(e).splitlines()[0]}", flush=True)
             continue

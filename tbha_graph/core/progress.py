@@ -5,6 +5,7 @@ Bars (tqdm) appear only on a terminal; in a log or CI the per-node lines are all
 from __future__ import annotations
 
 import sys
+import threading
 from typing import Any, Iterable, Iterator, TextIO, TypeVar
 
 T = TypeVar("T")
@@ -17,10 +18,12 @@ class Reporter:
         self.stream = stream or sys.stderr
         self.quiet = quiet
         self.bars = (not quiet) and (bars if bars is not None else bool(getattr(self.stream, "isatty", lambda: False)()))
+        self._lock = threading.Lock()  # nodes on several threads (run_local with jobs > 1): whole lines
 
     def _print(self, text: str) -> None:
         if not self.quiet:
-            print(text, file=self.stream, flush=True)
+            with self._lock:
+                print(text, file=self.stream, flush=True)
 
     def node_done(self, node_id: str, type_name: str, status: str, seconds: float, note: str = "") -> None:
         if self.quiet:  # the scheduler calls this once per node: format nothing when nothing is printed

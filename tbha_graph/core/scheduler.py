@@ -222,15 +222,21 @@ def run_local(
     reporter: Reporter,
     work_root: Path | None = None,
     materialise: list[tuple[str, str]] = (),
+    jobs: int = 1,
 ) -> dict[str, NodeResult]:
-    """The local executor: one node after another, in topological order.
+    """The local executor: with ``jobs`` 1 one node after another, in topological order; with more, each node
+    starts on a thread as soon as its inputs are ready, at most ``jobs`` at once (:func:`_run_concurrent`).
+    Either way the results come back in topological order and are the same (keys, values, warnings).
 
     ``materialise``: (node, port) values to load at the end (the outputs to write), so that a corrupt
     cached value is found here, where the node can be recomputed, rather than when writing.
 
-    The garbage collector is off for the scheduler's own steps (keys, lookups, bookkeeping: many small
-    long-lived objects, no cycles; at 10,000 cached nodes its passes cost about a quarter of the time)
-    and on while a node's function runs."""
+    With one job the garbage collector is off for the scheduler's own steps (keys, lookups, bookkeeping: many
+    small long-lived objects, no cycles; at 10,000 cached nodes its passes cost about a quarter of the time)
+    and on while a node's function runs. With several it stays on: the collector is one per process, and
+    some node is nearly always running."""
+    if jobs > 1:
+        return _run_concurrent(graph, node_ids, cache, reporter, work_root, materialise, jobs)
     was_enabled = gc.isenabled()
     paused_before = getattr(_gc, "paused_by_scheduler", False)
     gc.disable()
@@ -241,6 +247,98 @@ def run_local(
         _gc.paused_by_scheduler = paused_before
         if was_enabled:
             gc.enable()
+
+
+def _report(reporter: Reporter, bound: BoundNode, res: NodeResult) -> None:
+    for w in res.warnings:
+        reporter.warn(w)
+    for w in res.node_warnings:
+        reporter.warn(f"{bound.id}: {w}")
+    reporter.node_done(bound.id, bound.spec.type, res.status, res.seconds)
+
+
+def _run_concurrent(graph: Graph, node_ids: list[str], cache: Cache | None, reporter: Reporter,
+                    work_root: Path | None, materialise, jobs: int) -> dict[str, NodeResult]:
+    """Nodes on a pool of ``jobs`` threads, each submitted when every node it reads from is done (numpy,
+    OpenCV and MediaPipe release the GIL in their heavy work, so independent branches overlap). A failure
+    stops new submissions; the running nodes finish, then the first failure in topological order is raised.
+    A cached value found corrupt while loading (an input, or an output at the end): that node's entry is
+    removed and it and everything downstream of it run again, as in :func:`_run_local`."""
+    import contextvars
+    from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+
+    order = graph.needed_for(node_ids)
+    rank = {nid: i for i, nid in enumerate(order)}
+    deps = {nid: {src for src, _ in graph.nodes[nid].inputs.values()} for nid in order}
+    results: dict[str, NodeResult] = {}
+    retries = 0
+
+    def recompute(e: CorruptEntry) -> bool:
+        """Forget the corrupt node and what depends on it; False when that cannot help."""
+        nonlocal retries
+        bad = e.node or ""
+        if cache is None or bad not in results or retries > len(order):
+            return False
+        retries += 1
+        reporter.warn(f"{e.message}; recomputing node '{bad}'")
+        cache.remove(results[bad].key or "")
+        for k in {bad} | _downstream(bad, order, deps):
+            results.pop(k, None)
+        return True
+
+    with ThreadPoolExecutor(max_workers=jobs, thread_name_prefix="tbha-node") as pool:
+        while True:
+            running: dict = {}  # future -> node id
+            failures: dict[str, BaseException] = {}
+            while True:
+                if not failures:
+                    for nid in order:
+                        if len(running) >= jobs:
+                            break
+                        if nid in results or nid in running.values() or not deps[nid] <= results.keys():
+                            continue
+                        inputs = {src: results[src] for src in deps[nid]}
+                        ctx = contextvars.copy_context()  # the run's cache folder (using_cache_dir) in the thread
+                        running[pool.submit(ctx.run, execute_node, graph.nodes[nid], graph, inputs, cache, reporter,
+                                            work_root)] = nid
+                if not running:
+                    break
+                done, _ = wait(list(running), return_when=FIRST_COMPLETED)
+                for fut in sorted(done, key=lambda f: rank[running[f]]):
+                    nid = running.pop(fut)
+                    try:
+                        res = fut.result()
+                    except CorruptEntry as e:
+                        if not recompute(e):
+                            failures[nid] = e
+                        continue
+                    except BaseException as e:  # noqa: BLE001 - raised below, once the running nodes end
+                        failures[nid] = e
+                        continue
+                    if not deps[nid] <= results.keys():  # an input was found corrupt meanwhile: run it again
+                        continue
+                    _report(reporter, graph.nodes[nid], res)
+                    results[nid] = res
+            if failures:
+                raise failures[min(failures, key=rank.__getitem__)]
+            try:
+                for nid, port in materialise:
+                    if nid in results:
+                        results[nid].value(port, graph.nodes[nid])
+            except CorruptEntry as e:
+                if not recompute(e):
+                    raise
+                continue
+            return {nid: results[nid] for nid in order}
+
+
+def _downstream(nid: str, order: list[str], deps: dict[str, set[str]]) -> set[str]:
+    """Nodes of ``order`` that read, directly or not, from ``nid``."""
+    below: set[str] = set()
+    for later in order[order.index(nid) + 1:]:
+        if deps[later] & ({nid} | below):
+            below.add(later)
+    return below
 
 
 def _run_local(graph: Graph, node_ids: list[str], cache: Cache | None, reporter: Reporter, work_root: Path | None,
@@ -255,11 +353,7 @@ def _run_local(graph: Graph, node_ids: list[str], cache: Cache | None, reporter:
                 nid = order[i]
                 bound = graph.nodes[nid]
                 res = execute_node(bound, graph, results, cache, reporter, work_root)
-                for w in res.warnings:
-                    reporter.warn(w)
-                for w in res.node_warnings:
-                    reporter.warn(f"{nid}: {w}")
-                reporter.node_done(nid, bound.spec.type, res.status, res.seconds)
+                _report(reporter, bound, res)
                 results[nid] = res
                 i += 1
             for nid, port in materialise:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import threading
 import time
 from pathlib import Path
 
@@ -127,3 +128,34 @@ def interval(ctx, x):
     with open(ctx.params.log, "a") as f:
         f.write(f"{t0} {time.time()} {os.getpid()}\n")
     return x * ctx.params.factor
+
+
+class MeetParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    group: str = Field(description="nodes of one group wait for each other")
+    parties: int = Field(2, ge=1, description="nodes in the group")
+    timeout: float = Field(5.0, gt=0, description="seconds to wait for the others")
+    warn: str = Field("", description="a warning to give (empty: none)")
+    after: float = Field(0.0, ge=0, description="seconds to sleep after the meeting (to end after the others)")
+    factor: float = 1.0
+
+
+_MEETINGS: dict[str, "threading.Barrier"] = {}
+_MEETINGS_LOCK = threading.Lock()
+
+
+@node("test.meet", inputs={"x": Array("float")}, outputs={"y": Array("float64")}, params=MeetParams)
+def meet(ctx, x):
+    """Wait until every node of its group has started (a threading.Barrier): the run passes only when those nodes
+    run at the same time; one after another, the first waits ``timeout`` and fails."""
+    p = ctx.params
+    with _MEETINGS_LOCK:
+        barrier = _MEETINGS.setdefault(p.group, threading.Barrier(p.parties))
+    try:
+        barrier.wait(timeout=p.timeout)
+    except threading.BrokenBarrierError:
+        raise NodeError(f"the other nodes of group '{p.group}' did not start within {p.timeout} s") from None
+    time.sleep(p.after)
+    if p.warn:
+        ctx.warn(p.warn)
+    return x * p.factor

@@ -136,6 +136,7 @@ def test_mediapipe_runs_only_where_the_suit_shows_no_torso_patch():
 def test_default_pipeline_leaves_a_take_without_turns_as_it_was(tmp_path):
     """default.yaml wires MediaPipe's keypoints to the solver where no torso patch is seen. The sample always
     shows its torso: Pose is not run and the solve is exactly the one without the detector (frames: none).
+    The first run has two jobs (independent nodes at once, tbha-run --jobs 2), the second one: bit for bit the same.
     (What the keypoints do on back-turned frames: test_solve_take.py::test_detector_keypoints_place_limbs_where_no_patch_is_seen;
     on the turning renders: ``python bench/solver_sweep.py`` against ``--no-keypoints``.)"""
     require_mediapipe()
@@ -145,7 +146,7 @@ def test_default_pipeline_leaves_a_take_without_turns_as_it_was(tmp_path):
     graph = load_graph(ROOT / "pipelines" / "default.yaml", sets=sets)
     assert graph.nodes["reconstruct"].inputs["keypoints"] == ("detect", "tracks")
     assert graph.nodes["detect"].inputs["suit"] == ("track", "tracks")
-    run = run_graph(graph, outputs=["reconstruct", "detect"], cache=False)
+    run = run_graph(graph, outputs=["reconstruct", "detect"], cache=False, jobs=2)  # two jobs: the same joints too
     off = run_graph(load_graph(ROOT / "pipelines" / "default.yaml", sets={**sets, "detect.frames": "none"}),
                     outputs=["reconstruct"], cache=False)
     assert run.output("detect.report")["frames_run"] == 0
