@@ -60,7 +60,7 @@ def world_joints(world: np.ndarray) -> np.ndarray:
     return joints16_from_landmarks(xyz, np.nan_to_num(world[..., 3]), MEDIAPIPE_POSE)[0]
 
 
-def score(name: str, sets: dict, jobs: int = 1) -> dict:
+def score(name: str, sets: dict, jobs: int | None = None) -> dict:
     folder = render(name)
     vars = {"video": str(folder / "sample.mp4"), "ground_truth": str(folder / "ground_truth.npz")}
     graph = load_graph(ROOT / "pipelines" / "mediapipe.yaml", sets=sets, vars=vars)
@@ -104,7 +104,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--takes", default=",".join(EVAL), help="comma-separated names of bench/mediapipe_renders.py's EVAL")
     ap.add_argument("--set", action="append", default=[], metavar="NODE.PARAM=VALUE", help="passed to the pipeline")
-    ap.add_argument("--jobs", type=int, default=1, help="nodes run at once (tbha-run --jobs): 2 overlaps the room's lines with detection")
+    ap.add_argument("--jobs", type=int, default=None, help="nodes run at once (tbha-run --jobs; default: the pipeline's 'jobs: 2', "
+                    "MediaPipe and the room's lines at the same time)")
     a = ap.parse_args()
     sets = {}
     for s in a.set:

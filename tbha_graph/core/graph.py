@@ -45,6 +45,7 @@ class Graph:
     path: str = "<python>"
     description: str = ""
     files: list[str] = field(default_factory=list)
+    jobs: int | None = None  # the pipeline file's 'jobs' (nodes run at once by default); None: not said
 
     def needed_for(self, node_ids: list[str]) -> list[str]:
         """The nodes (topologically ordered) that must be evaluated to produce ``node_ids``."""
@@ -313,4 +314,5 @@ def _build_graph(decl: PipelineDecl, registry: Registry | None) -> Graph:
         nid: BoundNode(id=nid, spec=specs[nid], params=params[nid], inputs=wiring[nid], loc=decl.nodes[nid].loc)
         for nid in decl.nodes
     }
-    return Graph(nodes=nodes, order=order, outputs=outputs, path=decl.path, description=decl.description, files=decl.files)
+    return Graph(nodes=nodes, order=order, outputs=outputs, path=decl.path, description=decl.description, files=decl.files,
+                 jobs=decl.jobs)

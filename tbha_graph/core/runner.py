@@ -47,13 +47,14 @@ def run_graph(
     scheduler: str | None = None,
     reporter: Reporter = QUIET,
     workers: int | None = None,
-    jobs: int = 1,
+    jobs: int | None = None,
 ) -> RunResult:
     """Run ``graph`` (the nodes the requested ``outputs`` need) and, with ``out_dir``, write them.
 
     ``cache``: True (default location), False/None (no caching) or a :class:`Cache`.
     ``executor``: "local" or "dask" (``scheduler`` = address of an existing cluster, else a LocalCluster).
-    ``jobs``: nodes the local executor runs at once (independent branches on threads; 1: one after another).
+    ``jobs``: nodes the local executor runs at once (independent branches on threads; 1: one after another);
+    None: what the pipeline file says (``jobs:``), else 1.
     """
     c: Cache | None = Cache() if cache is True else (cache or None)
     if out_dir is not None:
@@ -66,7 +67,7 @@ def run_graph(
         with using_cache_dir(c.root if c is not None else None):  # file-hash memo of this run's cache
             if executor == "local":
                 results = run_local(graph, ids, c, reporter, work_root, materialise=list(graph.outputs.values()) if out_dir is not None else [],
-                                    jobs=jobs)
+                                    jobs=jobs if jobs is not None else (graph.jobs or 1))
             elif executor == "dask":
                 from .executors.dask_executor import run_dask
 

@@ -74,6 +74,7 @@ def pipeline_schema(registry: Registry) -> dict[str, Any]:
         "additionalProperties": False,
         "properties": {
             "description": {"type": "string"},
+            "jobs": {"type": "integer", "minimum": 1, "description": "nodes the local executor runs at once (tbha-run --jobs overrides)"},
             "extends": {"type": "string", "description": "path of a pipeline file this one overrides"},
             "vars": {"type": "object"},
             "outputs": {"type": "object", "additionalProperties": {"type": "string", "pattern": r"^[^.]+\..+$"}},

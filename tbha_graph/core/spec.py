@@ -3,6 +3,7 @@
 A pipeline file::
 
     description: what it does
+    jobs: 2                       # optional; nodes run at once by default (tbha-run --jobs overrides)
     extends: base.yaml            # optional; nodes are overridden by id
     vars: {video: clip.mp4}       # ${video} is substituted in strings; --var video=... overrides
     nodes:
@@ -30,7 +31,7 @@ from .node import NodeSpec
 from .yamlfile import LocatedDict, load_yaml
 
 _VAR = re.compile(r"\$\{([A-Za-z_][A-Za-z0-9_]*)\}")
-TOP_KEYS = ("description", "extends", "vars", "nodes", "outputs")
+TOP_KEYS = ("description", "jobs", "extends", "vars", "nodes", "outputs")
 NODE_KEYS = ("type", "params", "inputs", "remove")
 
 
@@ -59,6 +60,7 @@ class PipelineDecl:
 
     path: str = "<python>"
     description: str = ""
+    jobs: int | None = None  # nodes the local executor runs at once unless told otherwise; None: 1
     nodes: dict[str, NodeDecl] = field(default_factory=dict)
     outputs: dict[str, Value] = field(default_factory=dict)
     vars: dict[str, Value] = field(default_factory=dict)
@@ -70,6 +72,7 @@ class PipelineDecl:
         return PipelineDecl(
             path=self.path,
             description=self.description,
+            jobs=self.jobs,
             nodes={k: NodeDecl(n.id, n.type, n.loc, n.type_loc, _copy_values(n.params), _copy_values(n.inputs))
                    for k, n in self.nodes.items()},
             outputs=_copy_values(self.outputs),
@@ -168,6 +171,13 @@ def _read_file(path: Path, errors: list[PipelineError], chain: tuple[Path, ...])
     decl.files.append(str(path))
     if data.get("description"):
         decl.description = str(data["description"])
+    if "jobs" in data:
+        j = data["jobs"]
+        if isinstance(j, bool) or not isinstance(j, int) or j < 1:
+            errors.append(PipelineError(f"'jobs' must be a whole number of at least 1, not {j!r}", location=data.loc_of("jobs"),
+                                        hint="jobs: 2 runs independent nodes at the same time; leave it out for one after another"))
+        else:
+            decl.jobs = j
     for section in ("vars", "nodes", "outputs"):
         sub = data.get(section)
         if sub is None:

@@ -89,3 +89,25 @@ def test_a_corrupt_cached_input_is_recomputed_with_two_jobs(write, registry, cac
     np.testing.assert_allclose(r2.output("sum.npz"), 2 * 2 + 2 * 4)
     with np.load(tmp_path / "o" / "sum.npz", allow_pickle=False) as z:
         np.testing.assert_allclose(z["value"], 12.0)
+
+
+def test_a_pipeline_file_says_how_many_jobs(write, registry, cache):
+    """``jobs: 2`` at the top of a pipeline file is its default (the meeting passes without jobs= in the call);
+    jobs= in the call (tbha-run --jobs) overrides it; a bad value is an error naming the file and line."""
+    from tbha_graph.core.errors import PipelineErrors
+
+    text = "jobs: 2\n" + meeting(timeout=0.3).replace("\n        ", "\n").strip() + "\n"
+    graph = load_graph(write("p.yaml", text), registry=registry)
+    assert graph.jobs == 2
+    np.testing.assert_allclose(run_graph(graph, cache=cache).output("sum.npz"), 5.0)
+    with pytest.raises(NodeFailed):
+        run_graph(load_graph(write("q.yaml", text.replace(uuid_of(text), uuid.uuid4().hex)), registry=registry),
+                  cache=cache, jobs=1)
+    with pytest.raises(PipelineErrors) as ei:
+        load_graph(write("bad.yaml", text.replace("jobs: 2", "jobs: 0")), registry=registry)
+    assert "bad.yaml:1" in str(ei.value) and "'jobs' must be a whole number" in str(ei.value)
+
+
+def uuid_of(text: str) -> str:
+    """The meeting group's name in a pipeline text made by :func:`meeting`."""
+    return text.split('group: "', 1)[1].split('"', 1)[0]
