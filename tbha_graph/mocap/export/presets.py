@@ -361,13 +361,12 @@ def contact_sheet(
     axis the actor's left should point along, vertical = up; side view: horizontal = the axis the actor
     should face. Axes are flipped where needed so that "left" and "forward" point right on the page,
     and labelled with the application's own axis names and coordinates. The floor line is the clip's
-    lowest point. Written atomically as PNG; returns ``path``.
+    lowest point. Written atomically as PNG; returns ``path``. Drawn with Agg on a ``Figure`` of its own,
+    without pyplot (whose figures and backend are process-wide: not safe beside nodes drawing in other threads).
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.collections import LineCollection
+    from matplotlib.figure import Figure
     from matplotlib.ticker import MaxNLocator
 
     n = app_positions.shape[0]
@@ -384,7 +383,9 @@ def contact_sheet(
     for j in right:
         colours[j] = "tab:red"
     bones = [j for j in range(len(parents)) if parents[j] >= 0]
-    fig, axes = plt.subplots(2, len(picks), figsize=(2.3 * len(picks) + 0.4, 5.4), squeeze=False)
+    fig = Figure(figsize=(2.3 * len(picks) + 0.4, 5.4))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(2, len(picks), squeeze=False)
     for col, f in enumerate(picks):
         p = app_positions[f]
         facing = np.cross(p[hips_pair[0]] - p[hips_pair[1]], up)
@@ -417,7 +418,6 @@ def contact_sheet(
     fig.subplots_adjust(left=0.08, right=0.98, bottom=0.09, top=0.88, wspace=0.45, hspace=0.38)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=80)
-    plt.close(fig)
     path = Path(path)
     atomic_write_bytes(path, buf.getvalue())
     return path
