@@ -71,6 +71,9 @@ def positive_int(text: str) -> int:
     return v
 
 
+JOBS_HELP = "nodes the local executor runs at once (independent branches; default: the pipeline's 'jobs', else 1)"
+
+
 def add_run_arguments(p) -> None:
     p.add_argument("pipeline", help="pipeline YAML file")
     p.add_argument("--out", "-o", help="run directory (default: runs/<pipeline name>)")
@@ -80,7 +83,7 @@ def add_run_arguments(p) -> None:
     p.add_argument("--executor", choices=["local", "dask"], default="local", help="where nodes run (dask: a LocalCluster unless --scheduler)")
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="address of an existing Dask scheduler (implies --executor dask)")
     p.add_argument("--workers", type=int, help="workers of the LocalCluster (dask executor)")
-    p.add_argument("--jobs", "-j", type=positive_int, metavar="N", help="nodes the local executor runs at once (independent branches; default: the pipeline's 'jobs', else 1)")
+    p.add_argument("--jobs", "-j", type=positive_int, metavar="N", help=JOBS_HELP)
     p.add_argument("--no-cache", action="store_true", help="run everything, read and write no cache")
     p.add_argument("--cache-dir", help="cache folder (default: $TBHA_CACHE_DIR or the user cache folder)")
     p.add_argument("--plugin", action="append", metavar="MODULE", help="also register the nodes of this importable module")

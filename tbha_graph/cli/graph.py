@@ -19,7 +19,7 @@ import textwrap
 from pathlib import Path
 
 # the framework is imported inside the commands, so that `tbha-graph --help` starts fast
-from .common import EXIT_FAILED, EXIT_OK, add_run_arguments, guarded, parse_assignments
+from .common import EXIT_FAILED, EXIT_OK, JOBS_HELP, add_run_arguments, guarded, parse_assignments, positive_int
 
 
 def _registry(args):
@@ -199,7 +199,7 @@ def cmd_study(args) -> int:
     out = Path(args.out) if args.out else Path("runs") / "studies" / Path(args.study).stem
     cache = Cache(args.cache_dir) if args.cache_dir else Cache()
     rows = run_study(args.study, out, cache=cache, reporter=Reporter(quiet=args.quiet), executor=args.executor,
-                     sets=parse_assignments(args.set, "--set"))
+                     sets=parse_assignments(args.set, "--set"), jobs=args.jobs)
     print(to_markdown(rows))
     print(f"tables: {out / 'results.csv'}, {out / 'results.md'}")
     return EXIT_OK if all(r["status"] == "ok" for r in rows) else EXIT_FAILED
@@ -220,7 +220,7 @@ def cmd_batch(args) -> int:
     rows = run_batch(args.pipeline, takes, out, var_name=args.var_name, cache=cache, executor=executor,
                      scheduler=args.scheduler, workers=args.workers, reporter=Reporter(quiet=args.quiet),
                      plugins=tuple(args.plugin or ()), vars=parse_assignments(args.var, "--var"),
-                     sets=parse_assignments(args.set, "--set"))
+                     sets=parse_assignments(args.set, "--set"), jobs=args.jobs)
     print(to_markdown(rows, ("take", "status", "frames", "wall_s")))
     print(f"summary: {out / 'summary.csv'}, {out / 'summary.md'}")
     return EXIT_OK if all(r["status"] == "ok" for r in rows) else EXIT_FAILED
@@ -287,6 +287,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", "-o")
     s.add_argument("--cache-dir")
     s.add_argument("--executor", choices=["local", "dask"], default="local")
+    s.add_argument("--jobs", "-j", type=positive_int, metavar="N", help=JOBS_HELP)
     s.add_argument("--plugin", action="append")
     s.add_argument("--quiet", "-q", action="store_true")
     s.set_defaults(fn=cmd_study)
@@ -301,6 +302,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--executor", choices=["local", "dask"], default="local")
     s.add_argument("--scheduler", metavar="tcp://HOST:PORT")
     s.add_argument("--workers", type=int)
+    s.add_argument("--jobs", "-j", type=positive_int, metavar="N", help=JOBS_HELP + " (local executor)")
     s.add_argument("--cache-dir")
     s.add_argument("--no-cache", action="store_true")
     s.add_argument("--plugin", action="append")

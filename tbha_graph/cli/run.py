@@ -26,12 +26,12 @@ def run_command(args: argparse.Namespace) -> int:
     out_dir = Path(args.out) if args.out else Path("runs") / Path(args.pipeline).stem
     cache = None if args.no_cache else Cache(args.cache_dir) if args.cache_dir else Cache()
     executor = "dask" if args.scheduler else args.executor
-    jobs = args.jobs if args.jobs is not None else (graph.jobs or 1)
+    jobs = args.jobs if args.jobs is not None else (graph.jobs or 1)  # as run_graph resolves it (for the line below)
     print(f"tbha-run {args.pipeline}: {len(graph.nodes)} nodes, executor {executor}"
           f"{f' ({jobs} jobs)' if executor == 'local' and jobs > 1 else ''}, cache {'off' if cache is None else cache.root}", file=sys.stderr)
     try:
         run = run_graph(graph, out_dir=out_dir, outputs=args.output, cache=cache, executor=executor,
-                        scheduler=args.scheduler, reporter=reporter, workers=args.workers, jobs=jobs)
+                        scheduler=args.scheduler, reporter=reporter, workers=args.workers, jobs=args.jobs)
     except NodeFailed as e:
         print(f"error: {e.format()}", file=sys.stderr)
         print(f"the run failed; no run directory was written to {out_dir}. Nodes that finished are cached: "

@@ -110,8 +110,10 @@ def warm_workers(client: Any, pipeline: str, take: Take, var_name: str = "video"
 
 
 def run_take(pipeline: str, take: Take, var_name: str, out_dir: str, cache_root: str | None, metrics_name: str, plugins: tuple[str, ...] = (),
-             vars: dict[str, Any] | None = None, sets: dict[str, Any] | None = None, base_dir: str | None = None) -> dict[str, Any]:
-    """Run one take locally; returns its summary row (never raises for the take's own failures).
+             vars: dict[str, Any] | None = None, sets: dict[str, Any] | None = None, base_dir: str | None = None,
+             jobs: int | None = None) -> dict[str, Any]:
+    """Run one take locally (``jobs`` nodes at once; None: the pipeline's ``jobs:``); returns its summary row
+    (never raises for the take's own failures).
     ``vars``/``sets`` (the command line's ``--var``/``--set``, relative paths from ``base_dir``) apply to
     every take; a take's own ``set:`` entries win over ``sets``."""
     from .runner import load_graph, run_graph
@@ -122,7 +124,8 @@ def run_take(pipeline: str, take: Take, var_name: str, out_dir: str, cache_root:
     try:
         graph = load_graph(pipeline, vars={**(vars or {}), var_name: take.path}, sets={**(sets or {}), **take.sets},
                            base_dir=Path(base_dir) if base_dir else None)
-        run = run_graph(graph, out_dir=Path(out_dir) / take.name, cache=Cache(cache_root) if cache_root else False, reporter=QUIET)
+        run = run_graph(graph, out_dir=Path(out_dir) / take.name, cache=Cache(cache_root) if cache_root else False, reporter=QUIET,
+                        jobs=jobs)
         row["status"] = "ok"
         row["ran"] = sum(r.status == "ran" for r in run.results.values())
         row["cached"] = sum(r.status == "cached" for r in run.results.values())
@@ -153,13 +156,16 @@ def run_batch(
     vars: dict[str, Any] | None = None,
     sets: dict[str, Any] | None = None,
     client: Any = None,
+    jobs: int | None = None,
 ) -> list[dict[str, Any]]:
     """Run ``pipeline`` once per take; write ``summary.csv``/``summary.md`` under ``out_dir``.
     ``client``: a ``distributed.Client`` to run the takes on (executor "dask"), kept open afterwards, so
     batch after batch reuses one warm cluster (:func:`warm_workers`); without it a LocalCluster (or
     ``scheduler``) is started for this batch and closed after it.
     ``vars``/``sets`` apply to every take, like tbha-run's ``--var``/``--set`` (relative paths from the
-    current folder); ``var_name`` is bound to each take and cannot also be given in ``vars``."""
+    current folder); ``var_name`` is bound to each take and cannot also be given in ``vars``. ``jobs``: nodes a
+    take runs at once with the local executor (None: the pipeline's ``jobs:``); on Dask the takes run side by side
+    and each take as its pipeline says."""
     if vars and var_name in vars:
         raise TbhaError(f"--var {var_name}=... conflicts with the takes: each take is bound to '{var_name}'",
                         hint="drop that --var, or bind the takes to another variable with --var-name")
@@ -206,7 +212,7 @@ def run_batch(
                     cluster.close()
     else:
         for t in takes:
-            row = run_take(str(pipeline), t, var_name, str(out_dir), cache_root, metrics_name, tuple(plugins), *common)
+            row = run_take(str(pipeline), t, var_name, str(out_dir), cache_root, metrics_name, tuple(plugins), *common, jobs)
             reporter._print(f"  {row['status']:<7} {row['take']:<28} {row['wall_s']:8.2f} s" + (f"  {row.get('error', '')[:120]}" if row["status"] != "ok" else ""))
             rows.append(row)
     write_tables(rows, out_dir, stem="summary", first=("take", "status", "frames", "wall_s"))

@@ -21,8 +21,15 @@ class Reporter:
         self._lock = threading.Lock()  # nodes on several threads (run_local with jobs > 1): whole lines
 
     def _print(self, text: str) -> None:
-        if not self.quiet:
-            with self._lock:
+        if self.quiet:
+            return
+        with self._lock:
+            if self.bars:  # tqdm.write clears the bars (several nodes' at once with jobs > 1), prints, redraws them
+                from tqdm import tqdm
+
+                tqdm.write(text, file=self.stream)
+                self.stream.flush()
+            else:
                 print(text, file=self.stream, flush=True)
 
     def node_done(self, node_id: str, type_name: str, status: str, seconds: float, note: str = "") -> None:

@@ -15,7 +15,7 @@ from .registry import Registry
 from .rundir import check_out_dir, write_run_dir
 from .scheduler import RunResult, run_local, targets_of
 from .spec import PipelineDecl, apply_sets, apply_vars, read_pipeline
-from .errors import PipelineErrors
+from .errors import PipelineErrors, TbhaError
 
 
 def load_graph(
@@ -54,8 +54,12 @@ def run_graph(
     ``cache``: True (default location), False/None (no caching) or a :class:`Cache`.
     ``executor``: "local" or "dask" (``scheduler`` = address of an existing cluster, else a LocalCluster).
     ``jobs``: nodes the local executor runs at once (independent branches on threads; 1: one after another);
-    None: what the pipeline file says (``jobs:``), else 1.
+    None: what the pipeline file says (``jobs:``), else 1. With the dask executor a ``jobs`` above 1 is an error
+    (and the pipeline's is not used): its workers are its parallelism.
     """
+    if executor != "local" and jobs is not None and jobs > 1:
+        raise TbhaError(f"jobs is for the local executor, not {executor}",
+                        hint="the dask executor runs independent nodes on its workers: give --workers instead")
     c: Cache | None = Cache() if cache is True else (cache or None)
     if out_dir is not None:
         check_out_dir(Path(out_dir))  # refuse a folder that is not ours before spending time on the run

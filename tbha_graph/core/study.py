@@ -90,8 +90,10 @@ def run_study(
     reporter: Reporter | None = None,
     executor: str = "local",
     sets: dict[str, Any] | None = None,
+    jobs: int | None = None,
 ) -> list[dict[str, Any]]:
-    """Run every variant on every input; write results.csv / results.md under ``out_dir``. ``sets``
+    """Run every variant on every input; write results.csv / results.md under ``out_dir``. ``jobs``: nodes each
+    run runs at once (:func:`.runner.run_graph`; None: the pipeline's ``jobs:``, else 1). ``sets``
     (the command line's ``--set``, e.g. a shorter frame range for a quick look) apply to every run (a
     variant's own ``set:`` of the same param wins); their relative paths start from the current folder."""
     path = Path(path)
@@ -135,7 +137,7 @@ def run_study(
                 wanted = study.get("outputs")
                 if wanted:
                     graph.outputs = {k: v for k, v in graph.outputs.items() if k in wanted}
-                run = run_graph(graph, out_dir=out_dir / vname / iname, cache=cache, reporter=reporter, executor=executor)
+                run = run_graph(graph, out_dir=out_dir / vname / iname, cache=cache, reporter=reporter, executor=executor, jobs=jobs)
                 row["status"] = "ok"
                 row["ran"] = sum(r.status == "ran" for r in run.results.values())
                 row["cached"] = sum(r.status == "cached" for r in run.results.values())

@@ -111,3 +111,20 @@ def test_a_pipeline_file_says_how_many_jobs(write, registry, cache):
 def uuid_of(text: str) -> str:
     """The meeting group's name in a pipeline text made by :func:`meeting`."""
     return text.split('group: "', 1)[1].split('"', 1)[0]
+
+
+def test_a_study_passes_jobs_on_and_dask_refuses_them(write, registry, cache, tmp_path):
+    """``tbha-graph study --jobs`` reaches each run (the meeting passes only with 2); the dask executor, whose
+    workers are its parallelism, refuses a jobs above 1 with a clear error."""
+    from tbha_graph.core.errors import TbhaError
+    from tbha_graph.core.study import run_study
+
+    pipe = write("p.yaml", meeting(timeout=1.0))
+    study = write("s.yaml", f"""
+        base: {pipe}
+        variants: {{only: {{}}}}
+    """)
+    rows = run_study(study, tmp_path / "study", cache=cache, registry=registry, jobs=2)
+    assert [r["status"] for r in rows] == ["ok"]
+    with pytest.raises(TbhaError, match="local executor"):
+        run_graph(load_graph(pipe, registry=registry), cache=cache, executor="dask", jobs=2)
