@@ -14,7 +14,7 @@ def run_command(args: argparse.Namespace) -> int:
     from ..core.errors import NodeFailed
     from ..core.progress import Reporter
     from ..core.registry import default_registry, load_plugin_modules
-    from ..core.runner import load_graph, run_graph
+    from ..core.runner import effective_jobs, load_graph, run_graph
 
     reporter = Reporter(quiet=args.quiet)
     reg = default_registry()
@@ -26,7 +26,7 @@ def run_command(args: argparse.Namespace) -> int:
     out_dir = Path(args.out) if args.out else Path("runs") / Path(args.pipeline).stem
     cache = None if args.no_cache else Cache(args.cache_dir) if args.cache_dir else Cache()
     executor = "dask" if args.scheduler else args.executor
-    jobs = args.jobs if args.jobs is not None else (graph.jobs or 1)  # as run_graph resolves it (for the line below)
+    jobs = effective_jobs(graph, args.jobs)
     print(f"tbha-run {args.pipeline}: {len(graph.nodes)} nodes, executor {executor}"
           f"{f' ({jobs} jobs)' if executor == 'local' and jobs > 1 else ''}, cache {'off' if cache is None else cache.root}", file=sys.stderr)
     try:

@@ -37,6 +37,11 @@ def load_graph(
     return build_graph(decl, registry)
 
 
+def effective_jobs(graph: Graph, jobs: int | None) -> int:
+    """Nodes the local executor runs at once: ``jobs`` if given, else the pipeline file's ``jobs:``, else 1."""
+    return jobs if jobs is not None else (graph.jobs or 1)
+
+
 def run_graph(
     graph: Graph,
     *,
@@ -71,7 +76,7 @@ def run_graph(
         with using_cache_dir(c.root if c is not None else None):  # file-hash memo of this run's cache
             if executor == "local":
                 results = run_local(graph, ids, c, reporter, work_root, materialise=list(graph.outputs.values()) if out_dir is not None else [],
-                                    jobs=jobs if jobs is not None else (graph.jobs or 1))
+                                    jobs=effective_jobs(graph, jobs))
             elif executor == "dask":
                 from .executors.dask_executor import run_dask
 

@@ -249,6 +249,13 @@ def run_local(
             gc.enable()
 
 
+def _materialise(results: dict[str, NodeResult], graph: Graph, materialise) -> None:
+    """Load the (node, port) values to write, so that a corrupt cached one is found while it can be recomputed."""
+    for nid, port in materialise:
+        if nid in results:
+            results[nid].value(port, graph.nodes[nid])
+
+
 def _report(reporter: Reporter, bound: BoundNode, res: NodeResult) -> None:
     for w in res.warnings:
         reporter.warn(w)
@@ -282,7 +289,7 @@ def _run_concurrent(graph: Graph, node_ids: list[str], cache: Cache | None, repo
         retries += 1
         reporter.warn(f"{e.message}; recomputing node '{bad}'")
         cache.remove(results[bad].key or "")
-        for k in {bad} | _downstream(bad, order, deps):
+        for k in order[rank[bad]:]:  # as _run_local: it and every later node again (those not below it: from the cache)
             results.pop(k, None)
         return True
 
@@ -292,10 +299,11 @@ def _run_concurrent(graph: Graph, node_ids: list[str], cache: Cache | None, repo
             failures: dict[str, BaseException] = {}
             while True:
                 if not failures:
+                    busy = set(running.values())
                     for nid in order:
                         if len(running) >= jobs:
                             break
-                        if nid in results or nid in running.values() or not deps[nid] <= results.keys():
+                        if nid in results or nid in busy or not deps[nid] <= results.keys():
                             continue
                         inputs = {src: results[src] for src in deps[nid]}
                         ctx = contextvars.copy_context()  # the run's cache folder (using_cache_dir) in the thread
@@ -322,23 +330,12 @@ def _run_concurrent(graph: Graph, node_ids: list[str], cache: Cache | None, repo
             if failures:
                 raise failures[min(failures, key=rank.__getitem__)]
             try:
-                for nid, port in materialise:
-                    if nid in results:
-                        results[nid].value(port, graph.nodes[nid])
+                _materialise(results, graph, materialise)
             except CorruptEntry as e:
                 if not recompute(e):
                     raise
                 continue
             return {nid: results[nid] for nid in order}
-
-
-def _downstream(nid: str, order: list[str], deps: dict[str, set[str]]) -> set[str]:
-    """Nodes of ``order`` that read, directly or not, from ``nid``."""
-    below: set[str] = set()
-    for later in order[order.index(nid) + 1:]:
-        if deps[later] & ({nid} | below):
-            below.add(later)
-    return below
 
 
 def _run_local(graph: Graph, node_ids: list[str], cache: Cache | None, reporter: Reporter, work_root: Path | None,
@@ -356,9 +353,7 @@ def _run_local(graph: Graph, node_ids: list[str], cache: Cache | None, reporter:
                 _report(reporter, bound, res)
                 results[nid] = res
                 i += 1
-            for nid, port in materialise:
-                if nid in results:
-                    results[nid].value(port, graph.nodes[nid])
+            _materialise(results, graph, materialise)
             return results
         except CorruptEntry as e:  # a cached value failed its checksum while loading: recompute it
             bad = e.node or ""
