@@ -25,6 +25,7 @@ uses that instead, so equivalent settings share a key and different results neve
 from __future__ import annotations
 
 import builtins
+import contextvars
 import inspect
 import re
 import tempfile
@@ -37,6 +38,27 @@ from pydantic import BaseModel, ConfigDict
 
 from .errors import RegistryError
 from .types import PortType
+
+#: Set by the concurrent executor (:func:`.scheduler._run_concurrent`) to an Event it sets on Ctrl-C: a node
+#: running in a worker thread then stops at its next :meth:`Context.progress` step (threads cannot be interrupted)
+CANCEL: contextvars.ContextVar = contextvars.ContextVar("tbha_cancel", default=None)
+
+
+class Cancelled(KeyboardInterrupt):
+    """The run was interrupted (Ctrl-C) while this node ran in a worker thread: raised at its next progress step."""
+
+
+def _cancellable(it: Iterator[T], cancel) -> Iterator[T]:
+    """``it``'s items until ``cancel`` (a ``threading.Event``) is set, then :class:`Cancelled`; ``it`` closed either way."""
+    try:
+        for item in it:
+            if cancel.is_set():
+                raise Cancelled("interrupted")
+            yield item
+    finally:
+        close = getattr(it, "close", None)
+        if close is not None:
+            close()
 
 T = TypeVar("T")
 
@@ -181,7 +203,8 @@ class Context:
     * ``node_id``: the id of this node in the pipeline.
     * ``work_dir``: a private, empty folder for files the node produces (returned ``File`` outputs
       are moved into the cache from here).
-    * ``progress(iterable, total=None, desc="")``: wrap a long loop (e.g. over frames) to report progress.
+    * ``progress(iterable, total=None, desc="")``: wrap a long loop (e.g. over frames) to report progress
+      (and, running beside other nodes, to stop at the next step when the user presses Ctrl-C).
     * ``log(msg)``: a message shown under the node's progress line.
     * ``warn(msg)``: something the user must know about the result (a doubtful calibration, ...). Kept
       with the node's cache entry (a cached run reports it again), listed in ``manifest.json`` and the
@@ -212,9 +235,9 @@ class Context:
         return self.work_dir / name
 
     def progress(self, iterable: Iterable[T], total: int | None = None, desc: str = "") -> Iterator[T]:
-        if self._reporter is None:
-            return iter(iterable)
-        return self._reporter.progress(self.node_id, iterable, total=total, desc=desc)
+        it = iter(iterable) if self._reporter is None else self._reporter.progress(self.node_id, iterable, total=total, desc=desc)
+        cancel = CANCEL.get()
+        return it if cancel is None else _cancellable(it, cancel)
 
     def log(self, msg: str) -> None:
         if self._reporter is not None:

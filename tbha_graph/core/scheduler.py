@@ -20,7 +20,7 @@ from .cache import Cache, CorruptEntry, Entry
 from .errors import NodeFailed, PortTypeError, TbhaError
 from .graph import BoundNode, Graph
 from .filehash import using_cache_dir
-from .node import Context
+from .node import CANCEL, Context
 from .progress import QUIET, Reporter
 
 
@@ -270,7 +270,9 @@ def _run_concurrent(graph: Graph, node_ids: list[str], cache: Cache | None, repo
     OpenCV and MediaPipe release the GIL in their heavy work, so independent branches overlap). A failure
     stops new submissions; the running nodes finish, then the first failure in topological order is raised.
     A cached value found corrupt while loading (an input, or an output at the end): that node's entry is
-    removed and it and everything downstream of it run again, as in :func:`_run_local`."""
+    removed and it and everything downstream of it run again, as in :func:`_run_local`. Ctrl-C (a
+    KeyboardInterrupt while waiting) sets the run's cancel event (:data:`.node.CANCEL`): the running nodes stop
+    at their next ``ctx.progress`` step instead of running to their end, and the interrupt is raised."""
     import contextvars
     from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
@@ -293,49 +295,59 @@ def _run_concurrent(graph: Graph, node_ids: list[str], cache: Cache | None, repo
             results.pop(k, None)
         return True
 
-    with ThreadPoolExecutor(max_workers=jobs, thread_name_prefix="tbha-node") as pool:
-        while True:
-            running: dict = {}  # future -> node id
-            failures: dict[str, BaseException] = {}
-            while True:
-                if not failures:
-                    busy = set(running.values())
-                    for nid in order:
-                        if len(running) >= jobs:
+    cancel = threading.Event()
+    token = CANCEL.set(cancel)  # copied into each node's thread with the context (ctx.progress checks it)
+    try:
+        with ThreadPoolExecutor(max_workers=jobs, thread_name_prefix="tbha-node") as pool:
+            try:
+                while True:
+                    running: dict = {}  # future -> node id
+                    failures: dict[str, BaseException] = {}
+                    while True:
+                        if not failures:
+                            busy = set(running.values())
+                            for nid in order:
+                                if len(running) >= jobs:
+                                    break
+                                if nid in results or nid in busy or not deps[nid] <= results.keys():
+                                    continue
+                                inputs = {src: results[src] for src in deps[nid]}
+                                ctx = contextvars.copy_context()  # the run's cache folder (using_cache_dir) in the thread
+                                running[pool.submit(ctx.run, execute_node, graph.nodes[nid], graph, inputs, cache, reporter,
+                                                    work_root)] = nid
+                        if not running:
                             break
-                        if nid in results or nid in busy or not deps[nid] <= results.keys():
-                            continue
-                        inputs = {src: results[src] for src in deps[nid]}
-                        ctx = contextvars.copy_context()  # the run's cache folder (using_cache_dir) in the thread
-                        running[pool.submit(ctx.run, execute_node, graph.nodes[nid], graph, inputs, cache, reporter,
-                                            work_root)] = nid
-                if not running:
-                    break
-                done, _ = wait(list(running), return_when=FIRST_COMPLETED)
-                for fut in sorted(done, key=lambda f: rank[running[f]]):
-                    nid = running.pop(fut)
+                        done, _ = wait(list(running), return_when=FIRST_COMPLETED)
+                        for fut in sorted(done, key=lambda f: rank[running[f]]):
+                            nid = running.pop(fut)
+                            try:
+                                res = fut.result()
+                            except CorruptEntry as e:
+                                if not recompute(e):
+                                    failures[nid] = e
+                                continue
+                            except BaseException as e:  # noqa: BLE001 - raised below, once the running nodes end
+                                failures[nid] = e
+                                continue
+                            if not deps[nid] <= results.keys():  # an input was found corrupt meanwhile: run it again
+                                continue
+                            _report(reporter, graph.nodes[nid], res)
+                            results[nid] = res
+                    if failures:
+                        raise failures[min(failures, key=rank.__getitem__)]
                     try:
-                        res = fut.result()
+                        _materialise(results, graph, materialise)
                     except CorruptEntry as e:
                         if not recompute(e):
-                            failures[nid] = e
+                            raise
                         continue
-                    except BaseException as e:  # noqa: BLE001 - raised below, once the running nodes end
-                        failures[nid] = e
-                        continue
-                    if not deps[nid] <= results.keys():  # an input was found corrupt meanwhile: run it again
-                        continue
-                    _report(reporter, graph.nodes[nid], res)
-                    results[nid] = res
-            if failures:
-                raise failures[min(failures, key=rank.__getitem__)]
-            try:
-                _materialise(results, graph, materialise)
-            except CorruptEntry as e:
-                if not recompute(e):
-                    raise
-                continue
-            return {nid: results[nid] for nid in order}
+                    return {nid: results[nid] for nid in order}
+            except KeyboardInterrupt:  # Ctrl-C: the running nodes stop at their next progress step, not at their end
+                cancel.set()
+                pool.shutdown(wait=True, cancel_futures=True)
+                raise
+    finally:
+        CANCEL.reset(token)
 
 
 def _run_local(graph: Graph, node_ids: list[str], cache: Cache | None, reporter: Reporter, work_root: Path | None,

@@ -128,3 +128,32 @@ def test_a_study_passes_jobs_on_and_dask_refuses_them(write, registry, cache, tm
     assert [r["status"] for r in rows] == ["ok"]
     with pytest.raises(TbhaError, match="local executor"):
         run_graph(load_graph(pipe, registry=registry), cache=cache, executor="dask", jobs=2)
+
+
+def test_ctrl_c_stops_a_running_node_at_its_next_step(write, registry, cache, tmp_path):
+    """Ctrl-C while a node runs in a worker thread: the node stops at its next ctx.progress step (a thread cannot
+    be interrupted; without the cancel event the run waited for the node's end, here all 200 steps) and the run
+    raises KeyboardInterrupt (tbha-run: "interrupted ..., exit 130"), nothing of the node cached."""
+    import os
+    import signal
+    import threading
+
+    log = tmp_path / "steps.log"
+    text = f"""
+        nodes:
+          src: {{type: test.source, params: {{n: 3, value: 1.0}}}}
+          slow: {{type: test.steps, inputs: {{x: src.x}}, params: {{log: "{log}", steps: 200, sleep: 0.02}}}}
+        outputs: {{y.npz: slow.y}}
+    """
+    graph = load_graph(write("p.yaml", text), registry=registry)
+    timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))  # Ctrl-C half a second in (the node takes 4 s)
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            run_graph(graph, cache=cache, jobs=2)
+    finally:
+        timer.cancel()
+    done = len(log.read_text().splitlines())
+    assert 0 < done < 200, done
+    again = run_graph(graph, cache=cache, jobs=2)  # the interrupted node runs again; src comes from the cache
+    assert again.results["src"].status == "cached" and again.results["slow"].status == "ran"

@@ -159,3 +159,22 @@ def meet(ctx, x):
     if p.warn:
         ctx.warn(p.warn)
     return x * p.factor
+
+
+class StepsParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    log: str = Field(description="file to append each finished step's number to")
+    steps: int = 200
+    sleep: float = 0.02
+
+
+@node("test.steps", inputs={"x": Array("float")}, outputs={"y": Array("float64")}, params=StepsParams)
+def steps(ctx, x):
+    """Many slow steps through ``ctx.progress``, each logged as it ends (to see where an interrupted run stopped)."""
+    p = ctx.params
+    with open(p.log, "a") as f:
+        for k in ctx.progress(range(p.steps), total=p.steps, desc="steps"):
+            time.sleep(p.sleep)
+            f.write(f"{k}\n")
+            f.flush()
+    return x * 1.0
