@@ -89,7 +89,10 @@ def consistent_sides(points: np.ndarray, detected: np.ndarray, layout: Layout = 
     its labels every few frames while the actor stands facing it); on the turning renders of the offsets fit
     0 / 0, 0 / 4 and 80 / 83 (131_03's fast spin: a whole turn in about a second). Without the coupling the
     legs of the far and the hop takes went wrong for 70-100 frames. A prior for facing the camera fixed
-    half of 131_01's frames but broke the turning takes (60+ frames each), so there is none."""
+    half of 131_01's frames but broke the turning takes (60+ frames each), so there is none; neither is a cost on
+    the labelled torso width jumping between frames (round 11: weight 3 fixed half of 131_01 and broke the hop,
+    10 fixed the spin and broke another turn). ``python bench/mediapipe_sides.py --solve`` counts the frames
+    still wrong per render and what they cost the solve (131_01: PA 108 mm, 72 mm on the truth's labels)."""
     pts = np.asarray(points, dtype=np.float64)
     idx = np.flatnonzero(np.asarray(detected, dtype=bool))
     n = pts.shape[0]
