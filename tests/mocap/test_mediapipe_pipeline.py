@@ -58,6 +58,7 @@ def test_mediapipe_node_on_the_sample_matches_the_truth(tmp_path):
     raw = run_node(mediapipe_pose, {"sides": "detector", "offsets": "none", "facing": False}, video=clip)["tracks"]
     assert np.median(np.linalg.norm(raw["points"] - truth2d, axis=-1)[:, 4:]) > 20
     assert "point_offsets" not in raw and "facing" not in raw
+    assert "doubtful" not in t or not t["doubtful"].any()  # its labelled torso faces the camera: nothing doubtful
 
 
 class _Ctx:
@@ -202,3 +203,28 @@ def test_torso_facing_takes_its_depth_from_the_image_where_they_disagree():
     assert (fixed[..., 2] < -0.5).all()  # the sample faces the camera throughout its opening
     np.testing.assert_allclose(fixed[..., :2], blind[..., :2])  # only the front's depth component changes
     np.testing.assert_allclose(fixed[10:], blind[10:])
+
+
+def test_frames_seen_from_behind_are_doubtful_and_a_long_run_is_a_warning():
+    """Where the labelled torso shows its back (left on the image's left), a detector's left/right came from
+    continuity alone: those frames are doubtful (metrics' doubtful_ranges, the overlay), and a run of 10 or more
+    frames is a warning naming it (131_01's render: the body turned round on frames 43-104)."""
+    from tbha_graph.mocap.detect.mediapipe_pose import back_view_doubt, back_views
+    from tbha_graph.mocap.track.common import DOUBT
+
+    with np.load(SAMPLE / "ground_truth.npz") as z:
+        uv = z["joints2d"][:60].copy()  # the sample faces the camera
+    tracked = np.ones((60, 16), dtype=bool)
+    assert not back_views(uv, tracked).any()
+    mirror = [JOINT_INDEX[n.replace("left_", "@").replace("right_", "left_").replace("@", "right_")] for n in JOINT_NAMES]
+    uv[20:45] = uv[20:45][:, mirror]  # 25 frames labelled the wrong way round
+    uv[50:53] = uv[50:53][:, mirror]  # and a 3-frame glitch
+    back = back_views(uv, tracked)
+    assert back[20:45].all() and back[50:53].all() and back.sum() == 28
+    doubt, warning = back_view_doubt(uv, tracked, 100, "MediaPipe Pose on take.mp4")
+    assert (doubt[back] == DOUBT["ambiguous identity"]).all() and not doubt[~back].any()
+    assert warning is not None and "frames 120-144;" in warning and "take.mp4" in warning  # file frame numbers
+    tracked[20:45, JOINT_INDEX["left_shoulder"]] = False  # the thorax's quad lost: the pelvis's still shows the back
+    assert back_views(uv, tracked)[20:45].all()
+    tracked[20:45, JOINT_INDEX["left_hip"]] = False  # neither quad tracked: nothing to tell
+    assert not back_views(uv, tracked)[20:45].any()

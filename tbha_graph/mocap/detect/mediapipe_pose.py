@@ -34,7 +34,11 @@ What comes out and how (documented definitions):
 * **left/right**: MediaPipe decides a person's left from their look and, on a person whose face it cannot
   see, often swaps left and right for whole stretches (141 of the sample's 210 frames); with
   ``sides: consistent`` (default) the labels are re-decided so the limbs move continuously from an opening
-  facing the camera (:mod:`.left_right`); ``sides: detector`` keeps MediaPipe's.
+  facing the camera (:mod:`.left_right`); ``sides: detector`` keeps MediaPipe's. Where the labelled torso
+  then shows its back (:func:`back_views`) the labels came from continuity alone: with frames ``all`` those
+  frames are doubtful (the tracks' ``doubtful``: "ambiguous identity", in ``metrics.json``'s
+  ``doubtful_ranges`` and on the overlay) and a run of 10 or more frames is a warning naming it (on 131_01's
+  render the continuity went the wrong way on frames 43-104, ``bench/mediapipe_sides.py``).
 * MediaPipe's own temporal smoothing is off by default (``smooth_landmarks``): it blends a left/right swap
   over several frames into landmarks that belong to neither side, and the solver smooths anyway.
 * **facing** (with ``facing: true``, default): the tracks also carry, per frame, the thorax's and the pelvis's
@@ -69,6 +73,7 @@ from ..io.video import iter_frames
 from ..ports import MOTION, TRACKS2D, VIDEO, VideoClip, report_port
 from ..reconstruct.take_model import PELVIS_JOINTS, THORAX_JOINTS, fronts, torso_unseen
 from ..skeleton import JOINT_NAMES, N_JOINTS
+from ..track.common import DOUBT
 from .landmark_offsets import load_mediapipe_offsets
 from .left_right import GROUPS, apply_sides, consistent_sides
 
@@ -132,6 +137,8 @@ class MediaPipePoseParams(TorsoFractions):
 #: A torso quad's image winding decides which way it faces only when clear: |sin| of the angle between its
 #: left-right and up-down sides above this
 WINDING_MIN_SIN = 0.3
+#: Runs of at least this many frames seen from behind are a warning (shorter ones are marked doubtful only)
+BACK_VIEW_MIN_FRAMES = 10
 
 
 def torso_facing(motion: dict, points: np.ndarray | None = None) -> np.ndarray:
@@ -154,13 +161,51 @@ def torso_facing(motion: dict, points: np.ndarray | None = None) -> np.ndarray:
     seen = np.stack([tracked[:, list(THORAX_JOINTS)].all(axis=1), tracked[:, list(PELVIS_JOINTS)].all(axis=1)], axis=1)
     if points is not None:
         for k, quad in enumerate((THORAX_JOINTS, PELVIS_JOINTS)):
-            left, right, upper, lower = (np.asarray(points, dtype=np.float64)[:, j] for j in quad)
-            a, b = left - right, upper - lower
-            wind = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]  # < 0: seen from the front (the front's z < 0, towards the camera)
-            clear = np.abs(wind) > WINDING_MIN_SIN * np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1)
+            wind, clear = quad_winding(points, quad)
             backwards = clear & (np.sign(out[:, k, 2]) != np.where(wind < 0, -1.0, 1.0))
             out[backwards, k, 2] *= -1.0
     return np.where(seen[..., None] & np.isfinite(out), out, 0.0)
+
+
+def quad_winding(points: np.ndarray, quad: tuple[int, int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """The image winding ``(n,)`` of a torso quad's joints ``(left, right, upper, lower)`` in ``points`` ``(n, 16, 2)``
+    px — the z of ``(left - right) x (upper - lower)``: below 0 the quad is seen from its front (as labelled), above 0
+    from behind — and ``(n,)`` bool where it is clear (the sides' angle's ``|sin|`` above :data:`WINDING_MIN_SIN`)."""
+    left, right, upper, lower = (np.asarray(points, dtype=np.float64)[:, j] for j in quad)
+    a, b = left - right, upper - lower
+    wind = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    with np.errstate(invalid="ignore"):
+        clear = np.abs(wind) > WINDING_MIN_SIN * np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1)
+    return wind, clear
+
+
+def back_view_doubt(points: np.ndarray, tracked: np.ndarray, first_frame: int, where: str) -> tuple[np.ndarray, str | None]:
+    """The tracks' ``doubtful`` bits ``(n,)`` uint8 (:data:`..track.common.DOUBT` "ambiguous identity") on the
+    frames :func:`back_views` finds, and a warning naming the runs of at least :data:`BACK_VIEW_MIN_FRAMES` of them
+    (file frame numbers from ``first_frame``), or None: there the labels came from continuity alone."""
+    from ..reconstruct.take_solver import runs_of
+
+    back = back_views(points, tracked)
+    doubt = np.where(back, DOUBT["ambiguous identity"], 0).astype(np.uint8)
+    ranges = [f"{r[0] + first_frame}-{r[-1] + first_frame}" for r in runs_of(back, min_len=BACK_VIEW_MIN_FRAMES)]
+    if not ranges:
+        return doubt, None
+    return doubt, (f"{where}: the torso is seen from behind on frames {', '.join(ranges)}; MediaPipe cannot tell left "
+                   "from right there on a face it does not see, and the labels are carried over from the frames "
+                   "before: if they went the wrong way the body comes out turned round there (check the overlay)")
+
+
+def back_views(points: np.ndarray, tracked: np.ndarray) -> np.ndarray:
+    """``(n,)`` bool: frames whose labelled torso the image shows clearly from behind (:func:`quad_winding` of the
+    thorax's or the pelvis's quad, all four joints tracked). There a detector cannot see which side is the
+    person's left on a body whose face it does not see, and ``consistent_sides`` carries the labels over from
+    the frames before: where that went wrong the whole body comes out turned round (131_01's render: 74 of 180
+    frames, ``bench/mediapipe_sides.py``)."""
+    out = np.zeros(len(points), dtype=bool)
+    for quad in (THORAX_JOINTS, PELVIS_JOINTS):
+        wind, clear = quad_winding(points, quad)
+        out |= clear & (wind > 0) & np.asarray(tracked, dtype=bool)[:, list(quad)].all(axis=1)
+    return out
 
 
 def load_mediapipe_pose():
@@ -362,7 +407,7 @@ def prefetched_rgb_frames_range(video: VideoClip, start: int, stop: int) -> Iter
         yield index, cv2.cvtColor(frame, cv2.COLOR_BGR2RGB)
 
 
-@node("detect.mediapipe_pose", version=5,
+@node("detect.mediapipe_pose", version=6,
       inputs={"video": VIDEO,
               "suit": optional(TRACKS2D, "a suit tracker's tracks on the same video: with frames 'torso_unseen', Pose runs "
                                          "only where they see no torso patch")},
@@ -428,6 +473,12 @@ def mediapipe_pose(ctx, video, suit=None):
     motion = motion_from_mediapipe(take, video.fps, p.threshold, p.root_height, p, where)
     if p.facing:
         tracks["facing"] = torso_facing(motion, tracks["points"])
+    if runs is None and p.sides == "consistent":  # (with 'torso_unseen' the solver takes each pair either way round)
+        doubt, warning = back_view_doubt(tracks["points"], tracks["tracked"], video.start, where)
+        if doubt.any():
+            tracks["doubtful"] = doubt
+        if warning:
+            ctx.warn(warning)
     return {
         "tracks": tracks,
         "motion": motion,

@@ -7,7 +7,8 @@ Reasons (bits of a per-frame ``int``; the first four come from the tracker's ``d
 * ``lost joints``: at least the tracker's ``doubt_lost_joints`` (3) joints unseen for longer than its
   ``lost_after_frames`` (placed from the body, not measured);
 * ``ambiguous identity``: two same-coloured patches could be either joint about as well, or were told
-  apart by the body's facing only;
+  apart by the body's facing only; or a detector's left/right labels show the torso from behind, so they came
+  from continuity alone (``detect.mediapipe_pose``);
 * ``high residual``: the tracked patches were far from where the tracker predicted them;
 * ``unfilled gap``: some 3D joint neither tracked nor filled (``filter.fill_gaps`` leaves gaps longer
   than its ``max_gap_frames`` unfilled instead of inventing motion);
