@@ -39,6 +39,8 @@ from pydantic import BaseModel, ConfigDict
 from .errors import RegistryError
 from .types import PortType
 
+T = TypeVar("T")
+
 #: Set by the concurrent executor (:func:`.scheduler._run_concurrent`) to an Event it sets on Ctrl-C: a node
 #: running in a worker thread then stops at its next :meth:`Context.progress` step (threads cannot be interrupted)
 CANCEL: contextvars.ContextVar = contextvars.ContextVar("tbha_cancel", default=None)
@@ -60,7 +62,6 @@ def _cancellable(it: Iterator[T], cancel) -> Iterator[T]:
         if close is not None:
             close()
 
-T = TypeVar("T")
 
 _TYPE_NAME = re.compile(r"^[a-z][a-z0-9_]*(\.[a-z][a-z0-9_]*)+$")
 
