@@ -90,6 +90,24 @@ def test_jitter_and_bone_cv_known_values():
     assert np.count_nonzero(cv) == 1
 
 
+def test_means_over_no_values_are_nan_and_warn_nothing(no_hidden_warnings):
+    """frame_mean, joint_mean and bone_length_cv over slices with no values: NaN, with no warning emitted
+    and none hidden (np.nanmean / np.nanstd's figures elsewhere)."""
+    e = np.array([[1.0, np.nan, 3.0], [np.nan, np.nan, np.nan], [2.0, np.nan, 6.0]])
+    wrist, elbow, knee = (sk.JOINT_INDEX[k] for k in ("left_wrist", "left_elbow", "right_knee"))
+    j = np.broadcast_to(sk.tpose(), (4, sk.N_JOINTS, 3)).copy()
+    j[:, wrist] = j[:, elbow] + np.array([[0.2, 0, 0], [np.nan, 0, 0], [0.3, 0, 0], [0.25, 0, 0]])
+    j[:, knee] = np.nan  # the right thigh and shin never seen
+    with no_hidden_warnings():
+        frame, joint, cv = m.frame_mean(e), m.joint_mean(e), m.bone_length_cv(j)
+    np.testing.assert_array_equal(frame, [2.0, np.nan, 4.0])
+    np.testing.assert_array_equal(joint, [1.5, np.nan, 4.5])
+    assert cv[wrist - 1] == pytest.approx(np.std([0.2, 0.3, 0.25]) / 0.25, rel=1e-12)
+    unseen = [knee - 1, knee]  # the bones ending at the right knee and at its ankle
+    assert np.isnan(cv[unseen]).all()
+    assert np.count_nonzero(np.delete(cv, unseen + [wrist - 1])) == 0
+
+
 def test_joint_angles_known_values():
     """A T-pose has straight elbows (0 deg); bending the left forearm up by 90 deg shows as 90 deg at the
     left wrist joint and nowhere else; a rigid rotation of the whole body changes no joint angle."""

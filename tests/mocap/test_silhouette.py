@@ -9,7 +9,8 @@ import pytest
 
 from tbha_graph.mocap.io.video import probe_video
 from tbha_graph.mocap.reconstruct.take_model import SilhouetteField
-from tbha_graph.mocap.segment.silhouette import SilhouetteParams, distance_outside, silhouette_clip
+from tbha_graph.mocap.segment.silhouette import (SilhouetteParams, background_model, body_boxes, distance_outside,
+                                                 silhouette_clip)
 
 ROOT = Path(__file__).resolve().parents[2]
 VIDEO = ROOT / "data" / "sample" / "sample.mp4"
@@ -55,3 +56,23 @@ def test_a_frame_without_the_actor_constrains_nothing():
     one[10, 10] = 255
     d = distance_outside(one)
     assert d[10, 10] == 0 and d[10, 20] == 10 and d[0, 31] == 23  # pixels to the one foreground pixel
+
+
+def test_untracked_frames_and_always_covered_pixels_warn_nothing(no_hidden_warnings):
+    """A frame with nothing tracked gets a NaN box and a pixel the actor covers in every sample gets a
+    painted-in background (not known), with no warning emitted and none hidden."""
+    pts = np.zeros((3, 16, 2))
+    pts[..., 0], pts[..., 1] = np.linspace(100, 200, 16), np.linspace(50, 250, 16)
+    tracked = np.ones((3, 16), bool)
+    tracked[1] = False
+    samples = np.broadcast_to(np.array([0, 10, 20, 30], np.uint8)[:, None, None, None], (4, 3, 4, 3)).copy()
+    actor = np.zeros((4, 3, 4), bool)
+    actor[:, 0, 0] = True  # always covered
+    actor[:2, 1, 1] = True  # free in the samples of value 20 and 30 only
+    with no_hidden_warnings():
+        box = body_boxes(pts, tracked, 0.0)
+        bg, known = background_model(samples, actor, min_samples=1)
+    np.testing.assert_array_equal(box, [[100, 50, 200, 250], [np.nan] * 4, [100, 50, 200, 250]])
+    assert known.sum() == 11 and not known[0, 0]
+    assert (bg[1, 1] == 25).all() and (np.delete(bg.reshape(12, 3), [0, 5], axis=0) == 15).all()
+    assert ((bg[0, 0] >= 15) & (bg[0, 0] <= 25)).all()  # painted in from around it

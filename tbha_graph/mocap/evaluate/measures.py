@@ -11,8 +11,6 @@ call aligns every frame separately (PA-MPJPE) or, after reshaping to one batch, 
 """
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 
 from ..rigid import procrustes
@@ -23,9 +21,14 @@ ALIGNMENTS = ("similarity", "rigid", "none")
 
 
 def _nanmean(x: np.ndarray, axis=None) -> np.ndarray | float:
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN slices give NaN, which is what we want
-        return np.nanmean(x, axis=axis)
+    """``np.nanmean`` (the same figures) without its "Mean of empty slice" warning: a slice with no values
+    gives NaN. Sum of the non-NaN values over their count, 0 / 0 silenced by :class:`np.errstate` (per thread
+    / context); ``warnings.catch_warnings`` is process-wide and would touch the filters of nodes that run
+    in other threads (``tbha-run --jobs``)."""
+    x = np.asarray(x, dtype=np.float64)
+    ok = ~np.isnan(x)
+    with np.errstate(invalid="ignore"):
+        return np.sum(np.where(ok, x, 0.0), axis=axis) / np.sum(ok, axis=axis, dtype=np.intp)
 
 
 def nan_percentile(x: np.ndarray, q: float) -> float:
@@ -152,11 +155,11 @@ def bone_lengths(joints: np.ndarray) -> np.ndarray:
 def bone_length_cv(joints: np.ndarray) -> np.ndarray:
     """Coefficient of variation (std / mean over frames) of each bone's length, ``(J - 1,)`` (unitless)."""
     L = bone_lengths(joints)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        mean = np.nanmean(L, axis=0)
-        std = np.nanstd(L, axis=0)
+    mean = _nanmean(L, axis=0)
+    ok = ~np.isnan(L)  # np.nanstd's figures without its warnings: NaN for a bone never seen
     with np.errstate(divide="ignore", invalid="ignore"):
+        d = np.where(ok, L - mean, 0.0)
+        std = np.sqrt(np.sum(d * d, axis=0) / np.sum(ok, axis=0, dtype=np.intp))
         return np.where(mean > 0, std / mean, np.nan)
 
 

@@ -68,14 +68,11 @@ def body_boxes(points: np.ndarray, tracked: np.ndarray, margin: float) -> np.nda
     the body's height tall downwards from its top (the body's height in px: the median height of the frames
     with 12 or more tracked points), grown by ``margin`` times that height on every side. NaN rows: nothing
     tracked (the actor may be anywhere)."""
-    import warnings
-
     ok = tracked & np.isfinite(points).all(axis=-1)
     x = np.where(ok, points[..., 0], np.nan)
     y = np.where(ok, points[..., 1], np.nan)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        box = np.stack([np.nanmin(x, 1), np.nanmin(y, 1), np.nanmax(x, 1), np.nanmax(y, 1)], axis=1)
+    # fmin / fmax skip NaN like nanmin / nanmax (which call them) without the all-NaN row's warning
+    box = np.stack([np.fmin.reduce(x, 1), np.fmin.reduce(y, 1), np.fmax.reduce(x, 1), np.fmax.reduce(y, 1)], axis=1)
     full = ok.sum(axis=1) >= 12
     height = float(np.median(box[full, 3] - box[full, 1])) if full.any() else float(np.nanmax(box[:, 3] - box[:, 1], initial=100.0))
     box[:, 3] = np.maximum(box[:, 3], box[:, 1] + height)
@@ -99,21 +96,20 @@ def background_model(samples: np.ndarray, actor: np.ndarray, min_samples: int) -
     """Per-pixel median background ``(H', W', 3)`` float32 of ``samples`` ``(k, H', W', 3)`` uint8 (reduced frames)
     over the samples where ``actor`` ``(k, H', W')`` says the actor is not, and the mask ``(H', W')`` of pixels
     with at least ``min_samples`` such samples."""
-    import warnings
-
     k, h, w = samples.shape[:3]
     free = ~actor
     bg = np.empty((h, w, 3), dtype=np.float32)
     rows = max(1, (8 << 20) // max(k * w * 3 * 4, 1))  # strips of about 8 MB of float32 samples
     for r in range(0, h, rows):
         s = samples[:, r:r + rows].astype(np.float32)
-        s[~free[:, r:r + rows]] = np.nan
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            bg[r:r + rows] = np.nanmedian(s, axis=0)
+        f = free[:, r:r + rows]
+        s[~f] = np.nan
+        # a pixel with no free sample: 0s, not all NaN (nanmedian would warn "All-NaN slice"); its median 0
+        # is not kept: with fewer than min_samples free samples it is not `known` and is painted in below
+        s[:, ~f.any(axis=0)] = 0.0
+        bg[r:r + rows] = np.nanmedian(s, axis=0)
     count = free.sum(axis=0)
     known = count >= min_samples
-    bg = np.nan_to_num(bg)
     if not known.all():  # the actor is always near: the background there painted in from around it
         bg = cv2.inpaint(np.clip(np.rint(bg), 0, 255).astype(np.uint8), (~known).astype(np.uint8), 5,
                          cv2.INPAINT_TELEA).astype(np.float32)
