@@ -1,6 +1,7 @@
 """BVH reading/writing: real CMU clips, hand-made unusual files, an independent oracle, malformed files."""
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -9,6 +10,7 @@ from pydantic import ValidationError
 from scipy.spatial.transform import Rotation
 
 from tbha_graph.core.errors import NodeError
+from tbha_graph.mocap.io import bvh as bvh_module
 from tbha_graph.mocap.io.bvh import (
     Bvh,
     BvhError,
@@ -16,6 +18,7 @@ from tbha_graph.mocap.io.bvh import (
     bvh_positions,
     bvh_to_local,
     end_site_positions,
+    quat_to_euler,
     read_bvh,
     write_bvh,
 )
@@ -73,6 +76,56 @@ def test_euler_decomposition_round_trip(order: str, tmp_path: Path) -> None:
     assert err_mm < 0.01
     # unwrapped: no 360-degree jump between consecutive frames
     assert np.abs(np.diff(back.motion[:, 3:], axis=0)).max() < 180
+
+
+#: Middle angle +90, -90 and not locked: the angles given and those expected back (at gimbal lock the third
+#: angle is 0 and the first carries the rest; ZXY and XYZ alike)
+LOCKED = np.array([[10.0, 90.0, 20.0], [10.0, -90.0, 20.0], [10.0, 40.0, 20.0]])
+LOCKED_BACK = np.array([[30.0, 90.0, 0.0], [-10.0, -90.0, 0.0], [10.0, 40.0, 20.0]])
+
+
+@pytest.mark.parametrize("order", ["ZXY", "XYZ"])
+def test_gimbal_lock_gives_the_rotation_and_warns_nothing(order: str, no_hidden_warnings) -> None:
+    """quat_to_euler and bvh_from_local at gimbal lock: angles that give the rotation back, no warning
+    emitted and none hidden."""
+    q = Rotation.from_euler(order, LOCKED, degrees=True).as_quat()
+    local = np.stack([np.tile([0.0, 0.0, 0.0, 1.0], (3, 1)), q], axis=1)  # (3 frames, 2 joints, 4)
+    with no_hidden_warnings():
+        eul = quat_to_euler(local, order)
+        built = bvh_from_local(["root", "arm"], np.array([-1, 0]), np.array([[0.0, 0, 0], [0, 1, 0]]), None,
+                               local, np.zeros((3, 3)), 0.1, order=order)
+    assert eul.shape == (3, 2, 3)
+    np.testing.assert_allclose(eul[:, 1], LOCKED_BACK, atol=1e-9)
+    np.testing.assert_allclose(built.motion[:, 6:], LOCKED_BACK, atol=1e-9)
+    back, _ = bvh_to_local(built)
+    np.testing.assert_allclose(np.abs(np.sum(back[:, 1] * q, axis=-1)), 1.0, atol=1e-12)  # the same rotations
+
+
+def test_gimbal_lock_on_a_scipy_without_suppress_warnings(monkeypatch) -> None:
+    """scipy < 1.17 (as_euler without suppress_warnings, always warning at gimbal lock): the same angles and
+    no warning reaches the caller; a scipy that has the argument is recognised."""
+    import scipy
+
+    assert bvh_module._as_euler_can_be_quiet() == (tuple(int(v) for v in scipy.__version__.split(".")[:2]) >= (1, 17))
+    q = Rotation.from_euler("ZXY", LOCKED, degrees=True).as_quat()
+    real = Rotation.as_euler
+
+    def old_as_euler(self, seq, degrees=False):
+        return real(self, seq, degrees)
+
+    try:
+        with monkeypatch.context() as mp, warnings.catch_warnings():
+            warnings.simplefilter("error")
+            if bvh_module._as_euler_can_be_quiet():  # scipy >= 1.17: a stand-in for an older one
+                mp.setattr(Rotation, "as_euler", old_as_euler)
+                bvh_module._as_euler_can_be_quiet.cache_clear()
+            with pytest.raises(UserWarning, match="Gimbal lock"):
+                Rotation.from_quat(q).as_euler("ZXY", degrees=True)  # as scipy < 1.17 does
+            assert not bvh_module._as_euler_can_be_quiet()
+            eul = quat_to_euler(q, "ZXY")
+    finally:
+        bvh_module._as_euler_can_be_quiet.cache_clear()
+    np.testing.assert_allclose(eul, LOCKED_BACK, atol=1e-9)
 
 
 def test_agrees_with_bvhio_on_cmu(tmp_path: Path) -> None:

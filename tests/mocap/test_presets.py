@@ -134,3 +134,19 @@ def test_unknown_preset_is_refused(rot):
         run_node(export_bvh, {"preset": "maya"}, rotations=rot)
     assert set(presets.PRESET_NAMES) == {"blender", "y-up", "mixamo"}
     assert JOINT_NAMES[0] == "hips"
+
+
+def test_build_bvh_at_gimbal_lock_warns_nothing(no_hidden_warnings):
+    """Joints in two Euler orders, each at gimbal lock (middle angle 90 degrees) in one frame: channel angles
+    that give the rotations back (third angle 0), no warning emitted and none hidden."""
+    from scipy.spatial.transform import Rotation
+
+    angles = np.array([[10.0, 90.0, 20.0], [10.0, 40.0, 20.0]])
+    q = np.stack([Rotation.from_euler(o, angles, degrees=True).as_quat() for o in ("ZXY", "XYZ")], axis=1)
+    with no_hidden_warnings():
+        bvh = presets.build_bvh(["hips", "chest"], np.array([-1, 0]), np.array([[0.0, 0, 0], [0, 0.5, 0]]),
+                                [None, np.array([0.0, 0.5, 0])], q, np.zeros((2, 3)), 0.1, ["ZXY", "XYZ"])
+    back = np.array([[30.0, 90.0, 0.0], [10.0, 40.0, 20.0]])
+    np.testing.assert_allclose(bvh.motion[:, 3:6], back, atol=1e-9)
+    np.testing.assert_allclose(bvh.motion[:, 6:9], back, atol=1e-9)
+    assert bvh.joints[1].channels == ("Xrotation", "Yrotation", "Zrotation")

@@ -67,7 +67,7 @@ import numpy as np
 
 from ...core.errors import NodeError
 from ...core.atomic import atomic_write_bytes
-from ..io.bvh import Bvh, BvhJoint, POSITION_CHANNELS, bvh_positions, end_site_positions, read_bvh, write_bvh
+from ..io.bvh import Bvh, BvhJoint, POSITION_CHANNELS, bvh_positions, end_site_positions, quat_to_euler, read_bvh, write_bvh
 from ..io.skeleton_map import axes_matrix
 from ..kinematics import forward_kinematics
 from ..quat import quat_apply, quat_mul
@@ -217,18 +217,11 @@ def build_bvh(
     (n, J, 4) xyzw; ``root`` (n, 3). The root gets 6 channels (positions first), the others 3 rotation
     channels. Angles are unwrapped along time (no 360-degree jumps between frames).
     """
-    import warnings
-
-    from scipy.spatial.transform import Rotation
-
     n, nj = local.shape[0], len(names)
     angles = np.zeros((n, nj, 3))
     for order in sorted(set(orders)):
         cols = [j for j in range(nj) if orders[j] == order]
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)  # gimbal lock: the angles still give the rotation
-            eul = Rotation.from_quat(local[:, cols].reshape(-1, 4)).as_euler(order, degrees=True)
-        angles[:, cols] = eul.reshape(n, len(cols), 3)
+        angles[:, cols] = quat_to_euler(local[:, cols], order)
     if n > 1:
         angles = np.unwrap(angles, period=360.0, axis=0)
     joints = []

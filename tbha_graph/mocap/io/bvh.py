@@ -1,4 +1,5 @@
-"""Reading and writing BVH motion files, and converting their channels to quaternions and positions.
+"""Reading and writing BVH motion files, and converting their channels to quaternions and positions
+(and quaternions back to channel angles: :func:`quat_to_euler`).
 
 A BVH file has a ``HIERARCHY`` (a joint tree: per joint an ``OFFSET`` from its parent in file units,
 a ``CHANNELS`` list, children and optional ``End Site``) and a ``MOTION`` block (one line of channel
@@ -19,6 +20,8 @@ and what was expected, and nothing partial is returned. The writer is atomic and
 """
 from __future__ import annotations
 
+import functools
+import inspect
 import re
 import warnings
 from dataclasses import dataclass, field
@@ -471,6 +474,36 @@ def _check_order(order: str) -> str:
     return up
 
 
+@functools.cache
+def _as_euler_can_be_quiet() -> bool:
+    """Whether this scipy's ``Rotation.as_euler`` takes ``suppress_warnings`` (scipy >= 1.17)."""
+    from scipy.spatial.transform import Rotation
+
+    try:
+        return "suppress_warnings" in inspect.signature(Rotation.as_euler).parameters
+    except (TypeError, ValueError):  # a compiled method without a signature (older scipy)
+        return False
+
+
+def quat_to_euler(q: np.ndarray, order: str) -> np.ndarray:
+    """Euler angles ``(..., 3)`` degrees, intrinsic, in the channel order ``order`` (a permutation of
+    ``"XYZ"``, e.g. ``"ZXY"``: ``R = Rz(a) @ Rx(b) @ Ry(c)``), of quaternions ``q`` ``(..., 4)`` xyzw: the
+    inverse of :func:`bvh_to_local`'s conversion. At gimbal lock (middle angle +-90 degrees) the third
+    angle is 0 and the angles still give the rotation; no warning is emitted."""
+    from scipy.spatial.transform import Rotation
+
+    q = np.asarray(q, dtype=np.float64)
+    r = Rotation.from_quat(q.reshape(-1, 4))
+    order = _check_order(order)
+    if _as_euler_can_be_quiet():
+        eul = r.as_euler(order, degrees=True, suppress_warnings=True)
+    else:  # scipy < 1.17 always warns at gimbal lock; catch_warnings is process-wide, not thread-safe
+        with warnings.catch_warnings():  # (before Python 3.14): it may hide or reset another thread's filters
+            warnings.simplefilter("ignore", UserWarning)
+            eul = r.as_euler(order, degrees=True)
+    return eul.reshape(q.shape[:-1] + (3,))
+
+
 def bvh_from_local(
     names: Sequence[str],
     parents: np.ndarray,
@@ -492,8 +525,6 @@ def bvh_from_local(
             ``Xposition Yposition Zposition`` followed by its rotation channels.
     Angles are unwrapped along time (no 360-degree jumps between consecutive frames).
     """
-    from scipy.spatial.transform import Rotation
-
     order = _check_order(order)
     parents = validate_parents(parents)
     nj = len(names)
@@ -515,9 +546,7 @@ def bvh_from_local(
         ends = [arr[i].astype(np.float64) if is_leaf[i] else None for i in range(nj)]
     else:
         ends = [None if e is None else np.asarray(e, dtype=np.float64).reshape(3) for e in end_sites]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)  # gimbal lock: the angles still give the rotation
-        eul = Rotation.from_quat(local_quat.reshape(-1, 4)).as_euler(order, degrees=True).reshape(n, nj, 3)
+    eul = quat_to_euler(local_quat, order)
     if n > 1:
         eul = np.unwrap(eul, period=360.0, axis=0)
     rot_names = tuple(f"{a}rotation" for a in order)
