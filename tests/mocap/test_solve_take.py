@@ -417,3 +417,40 @@ def test_detector_keypoints_place_limbs_where_no_patch_is_seen(truth):
     without, with_kp, with_swapped = solve(None), solve(kp), solve(swapped)
     assert run_mm(with_kp) < 36.0 and run_mm(with_kp) < 0.75 * run_mm(without), (run_mm(with_kp), run_mm(without))
     np.testing.assert_allclose(with_swapped, with_kp, atol=1e-9)
+
+
+def test_report_holds_no_timing_so_the_metrics_key_is_stable(tmp_path, monkeypatch):
+    """The solver's report feeds evaluate.metrics (``extra``), so a wall-clock time in it would give the metrics
+    node a new cache key on every solve. A tiny pipeline (detector keypoints of CMU 131_02 -> a short solve ->
+    metrics) run twice, each into a fresh cache (both solve), the second with a clock running twice as fast:
+    the same report fingerprint and the same metrics key."""
+    import textwrap
+    import time
+
+    from tbha_graph.core.cache import Cache
+    from tbha_graph.core.runner import load_graph, run_graph
+
+    pipeline = tmp_path / "p.yaml"
+    pipeline.write_text(textwrap.dedent(f"""
+        nodes:
+          keypoints:
+            type: io.openpose_keypoints
+            params: {{path: {ROOT / "data" / "keypoints" / "cmu131_02" / "openpose"}, fps: 30.0, width: 640, height: 480}}
+          reconstruct:
+            type: reconstruct.solve_take
+            inputs: {{tracks: keypoints.tracks}}
+            params: {{focal_px: 700.0, points: joints, max_iterations: 2, calib_iterations: 2, calib_frames: 20,
+                      side_search: false, cross_seed: false}}
+          metrics:
+            type: evaluate.metrics
+            inputs: {{motion: reconstruct.motion, tracks: keypoints.tracks, camera: reconstruct.camera,
+                      extra: reconstruct.report}}
+        outputs: {{metrics.json: metrics.metrics}}
+    """))
+    first = run_graph(load_graph(pipeline), cache=Cache(tmp_path / "cache1")).results
+    real = time.perf_counter
+    monkeypatch.setattr(time, "perf_counter", lambda: 2.0 * real())
+    second = run_graph(load_graph(pipeline), cache=Cache(tmp_path / "cache2")).results
+    assert first["reconstruct"].status == second["reconstruct"].status == "ran"
+    assert first["reconstruct"].fingerprints["report"] == second["reconstruct"].fingerprints["report"]
+    assert first["metrics"].key == second["metrics"].key
