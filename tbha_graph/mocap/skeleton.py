@@ -68,6 +68,19 @@ BONES: np.ndarray = np.array([(int(PARENTS[j]), j) for j in range(1, N_JOINTS)],
 PATCHED_JOINTS: tuple[str, ...] = tuple(n for n in JOINT_NAMES if n != "head")
 N_PATCHES = len(PATCHED_JOINTS)
 
+#: The torso's seven points (near-rigid: hips, spine, shoulders, hip joints), whose suit patches fix the torso's
+#: turn and depth; by name and as indices into :data:`JOINT_NAMES`.
+TORSO_JOINT_NAMES: tuple[str, ...] = ("hips", "chest", "neck", "left_shoulder", "right_shoulder", "left_hip", "right_hip")
+TORSO_JOINTS: np.ndarray = np.array([JOINT_INDEX[n] for n in TORSO_JOINT_NAMES], dtype=np.int64)
+
+
+def torso_unseen(weight: np.ndarray) -> np.ndarray:
+    """``(n,)`` bool: frames where fewer than 3 of the torso's 7 points are tracked (``weight`` ``(n, 16)``: bool
+    tracked flags or weights, 0 = not tracked): the image does not fix the torso's turn or depth there (the
+    suit's patches are on the body's front: the actor's back to the camera, or the torso hidden)."""
+    return (np.asarray(weight)[:, TORSO_JOINTS] > 0).sum(axis=1) < 3
+
+
 #: The five torso points the coplanar Tsai calibration uses (seed 000, section 3.1).
 CALIBRATION_JOINTS: tuple[str, ...] = ("neck", "chest", "hips", "left_shoulder", "right_shoulder")
 

@@ -10,7 +10,8 @@ import pytest
 from tbha_graph.mocap.io.video import probe_video
 from tbha_graph.mocap.reconstruct.take_model import SilhouetteField
 from tbha_graph.mocap.segment.silhouette import (SilhouetteParams, background_model, body_boxes, distance_outside,
-                                                 silhouette_clip)
+                                                 silhouette_clip, unknown_background_warning)
+from tbha_graph.mocap.skeleton import TORSO_JOINTS
 
 ROOT = Path(__file__).resolve().parents[2]
 VIDEO = ROOT / "data" / "sample" / "sample.mp4"
@@ -76,3 +77,57 @@ def test_untracked_frames_and_always_covered_pixels_warn_nothing(no_hidden_warni
     assert known.sum() == 11 and not known[0, 0]
     assert (bg[1, 1] == 25).all() and (np.delete(bg.reshape(12, 3), [0, 5], axis=0) == 15).all()
     assert ((bg[0, 0] >= 15) & (bg[0, 0] <= 25)).all()  # painted in from around it
+
+
+def test_the_box_share_on_unknown_background_is_measured_per_frame(sample):
+    """The sample's actor stays near one spot: most of each frame's actor box lies where the background is never
+    seen (painted in)."""
+    truth, out = sample
+    u = out["unknown_box_pct"]
+    assert u.shape == (truth["joints2d"].shape[0],) and ((u >= 0) & (u <= 100)).all()
+    assert 55.0 < np.median(u) < 85.0  # measured 71.6
+
+
+def test_an_unknown_background_warns_only_where_the_outline_places_the_body():
+    """Known on 85 % only: a warning naming the frames only where no torso patch is seen for 10+ frames in a row
+    AND the actor stands on the unknown part then; otherwise a log line saying why it does not matter."""
+    n = 60
+    tracked = np.ones((n, 16), bool)
+    unknown = np.full(n, 70.0)
+    text, warn = unknown_background_warning(85.0, unknown, tracked, first_frame=0)
+    assert not warn and "seen on every frame" in text
+    tracked[20:40, TORSO_JOINTS] = False  # the actor's back to the camera on frames 20-39
+    text, warn = unknown_background_warning(85.0, unknown, tracked, first_frame=100)
+    assert warn and "frames 120-139" in text and "85 %" in text
+    away = unknown.copy()
+    away[20:40] = 10.0  # ... but standing where the background is known then
+    text, warn = unknown_background_warning(85.0, away, tracked, first_frame=0)
+    assert not warn and "20 frames" in text
+    short = np.ones((n, 16), bool)
+    short[20:29, TORSO_JOINTS] = False  # 9 frames: the motion's smoothness carries the body across
+    assert not unknown_background_warning(85.0, unknown, short, first_frame=0)[1]
+    short[29, TORSO_JOINTS] = False  # 10 frames
+    assert unknown_background_warning(85.0, unknown, short, first_frame=0)[1]
+
+
+def test_the_node_warns_only_when_the_back_is_turned_on_unknown_background():
+    """segment.silhouette on the sample's video: its torso is seen on every frame, so the unknown background is a log
+    line and the node gives no warning; the same take with the torso's patches lost on frames 100-139 warns, naming
+    them."""
+    from tbha_graph.core.node import Context
+    from tbha_graph.mocap.segment.silhouette import SilhouetteParams, silhouette
+
+    with np.load(TRUTH, allow_pickle=False) as z:
+        pts = z["joints2d"].astype(np.float64)
+    tracks = {"points": pts, "tracked": np.ones(pts.shape[:2], bool), "fps": np.asarray(30.0),
+              "width": np.asarray(640), "height": np.asarray(480)}
+    warnings = []
+    for hide in (False, True):
+        tr = dict(tracks, tracked=tracks["tracked"].copy())
+        if hide:
+            tr["tracked"][100:140, TORSO_JOINTS] = False
+        ctx = Context("segment.silhouette", SilhouetteParams(), work_dir=ROOT)
+        silhouette.fn(ctx, video=probe_video(VIDEO), tracks=tr)
+        warnings.append(list(ctx.warnings))
+    assert warnings[0] == []
+    assert len(warnings[1]) == 1 and "frames 100-139" in warnings[1][0]

@@ -183,14 +183,14 @@ def back_view_doubt(points: np.ndarray, tracked: np.ndarray, first_frame: int, w
     """The tracks' ``doubtful`` bits ``(n,)`` uint8 (:data:`..track.common.DOUBT` "ambiguous identity") on the
     frames :func:`back_views` finds, and a warning naming the runs of at least :data:`BACK_VIEW_MIN_FRAMES` of them
     (file frame numbers from ``first_frame``), or None: there the labels came from continuity alone."""
-    from ..reconstruct.take_solver import runs_of
+    from ..runs import runs_of, runs_text
 
     back = back_views(points, tracked)
     doubt = np.where(back, DOUBT["ambiguous identity"], 0).astype(np.uint8)
-    ranges = [f"{r[0] + first_frame}-{r[-1] + first_frame}" for r in runs_of(back, min_len=BACK_VIEW_MIN_FRAMES)]
-    if not ranges:
+    runs = runs_of(back, min_len=BACK_VIEW_MIN_FRAMES)
+    if not runs:
         return doubt, None
-    return doubt, (f"{where}: the torso is seen from behind on frames {', '.join(ranges)}; MediaPipe cannot tell left "
+    return doubt, (f"{where}: the torso is seen from behind on frames {runs_text(runs, first_frame)}; MediaPipe cannot tell left "
                    "from right there on a face it does not see, and the labels are carried over from the frames "
                    "before: if they went the wrong way the body comes out turned round there (check the overlay)")
 
@@ -334,7 +334,7 @@ def unseen_torso_runs(suit: dict, n_frames: int, margin: int) -> tuple[list[tupl
     (:func:`.take_model.torso_unseen`), each widened by ``margin`` frames either side (overlaps merged), and the
     number of frames without a torso patch."""
     from ..bundles.tracks import read_tracks
-    from ..reconstruct.take_solver import runs_of
+    from ..runs import runs_of
 
     tr = read_tracks(suit)
     if tr.n_frames != n_frames:

@@ -30,7 +30,7 @@ from functools import cached_property
 
 import numpy as np
 
-from ..skeleton import JOINT_INDEX, N_JOINTS, PARENTS, topological_order
+from ..skeleton import JOINT_INDEX, N_JOINTS, PARENTS, TORSO_JOINTS, topological_order, torso_unseen  # noqa: F401 (re-exported)
 
 J = JOINT_INDEX
 ORDER = topological_order()[1:]  # bones (by child joint) in an order where parents come first
@@ -79,9 +79,6 @@ DEFAULT_POINT_OFFSETS = np.array([
     [0.000, 0.068],   # right_knee
     [-0.021, 0.048],  # right_ankle
 ])
-
-#: Joints of the near-rigid torso (their acceleration may have its own, tighter prior).
-TORSO_JOINTS = np.array([J[n] for n in ("hips", "chest", "neck", "left_shoulder", "right_shoulder", "left_hip", "right_hip")])
 
 #: Torso joint pairs kept at their rest distance (near-rigid torso), as index arrays.
 TORSO_PAIRS = np.array([(J[a], J[b]) for a, b in (
@@ -398,12 +395,6 @@ def sil_residuals(P: np.ndarray, f: float, centre: np.ndarray, sil: SilhouetteFi
     r = robust(e, w.robust_scale)
     drho = np.where(e <= 0.0, 0.0, robust_slope(e, w.robust_scale))  # the clamp at 0 has no slope
     return r, {"drho": drho, "grad": grad, "X": X}
-
-
-def torso_unseen(weight: np.ndarray) -> np.ndarray:
-    """``(n,)`` bool: frames where fewer than 3 of the torso's 7 points are tracked (weights ``(n, 16)``): the
-    image does not fix the torso's turn or depth there."""
-    return (weight[:, TORSO_JOINTS] > 0).sum(axis=1) < 3
 
 
 def cover_residuals(P: np.ndarray, f: float, centre: np.ndarray, sil: SilhouetteField, lengths: np.ndarray, w: "Weights",

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..runs import runs_of
 from ..skeleton import N_JOINTS, PARENTS
 from .take_jacobian import global_jacobian, joint_jacobian, length_jacobian, residual_jacobian
 from .take_model import (ANKLES, J, N_BONES, PER_FRAME, TakeProblem, bone_directions,
@@ -397,14 +398,6 @@ def search_sides_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, iterations:
                 P[lo:hi] = outs[1]
                 kept += 1
     return P, kept
-
-
-def runs_of(mask: np.ndarray, min_len: int = 2) -> list[np.ndarray]:
-    """Runs ``[frames, ...]`` of consecutive True frames of ``mask`` ``(n,)`` at least ``min_len`` long."""
-    m = np.r_[False, np.asarray(mask, bool), False].astype(np.int8)
-    edges = np.flatnonzero(np.diff(m))
-    return [np.arange(a, b) for a, b in zip(edges[::2], edges[1::2]) if b - a >= min_len]
-
 
 
 def turned(P: np.ndarray, frames: np.ndarray, up: np.ndarray, angle: np.ndarray) -> np.ndarray:

@@ -25,7 +25,13 @@ Method (the camera is still):
 Output ``silhouette``: ``distance`` ``(n_frames, H', W')`` uint8 (reduced pixels outside the silhouette;
 full-resolution pixels = value / scale), ``scale`` (reduced / full size), ``area_px`` ``(n_frames,)`` the
 silhouette's area in full-resolution pixels², ``bottom_px`` ``(n_frames,)`` the image row (full-resolution px, y down) of
-its lowest pixel (the sole of the lower foot; NaN on an empty frame), ``background_known_pct``.
+its lowest pixel (the sole of the lower foot; NaN on an empty frame), ``background_known_pct``, ``unknown_box_pct``
+``(n_frames,)`` the % of each frame's actor box where the background is unknown.
+
+A background known on less than 90 % of the image (the actor stays on one spot: what is behind them is never
+seen) is a warning only where it matters (:func:`unknown_background_warning`): on a run of frames whose torso
+patches are unseen (the actor's back to the camera), where the outline is what places the body, with the actor
+standing on the unknown part; otherwise a log line (the sample: its torso is seen on every frame).
 """
 from __future__ import annotations
 
@@ -38,6 +44,15 @@ from ...core.node import node
 from ..bundles.tracks import read_tracks
 from ..io.video import iter_frames
 from ..ports import SILHOUETTE, TRACKS2D, VIDEO, VideoClip
+from ..runs import runs_of, runs_text
+from ..skeleton import torso_unseen
+
+#: A frame's actor box (:func:`body_boxes`) more than this % of which lies where the background is unknown
+#: counts as the actor standing on the unknown background
+UNKNOWN_BOX_PCT = 20.0
+#: Fewest consecutive such frames (with no torso patch seen) that make the unknown background a warning: over a
+#: few frames the motion's smoothness carries the body across (a third of a second at 30 fps)
+UNKNOWN_RUN_MIN_FRAMES = 10
 
 
 class SilhouetteParams(BaseModel):
@@ -90,6 +105,17 @@ def box_masks(boxes: np.ndarray, shape: tuple[int, int], scale: float) -> np.nda
     inx = (xs[None, :] >= b[:, 0:1]) & (xs[None, :] <= b[:, 2:3])
     iny = (ys[None, :] >= b[:, 1:2]) & (ys[None, :] <= b[:, 3:4])
     return (iny[:, :, None] & inx[:, None, :]) | ~known[:, None, None]
+
+
+def unknown_box_pct(known: np.ndarray, boxes: np.ndarray, scale: float, chunk: int = 64) -> np.ndarray:
+    """``(n,)``: % of each frame's box ``(n, 4)`` (full-resolution px; a NaN box is the whole image) lying where the
+    background is unknown (``known`` ``(H', W')`` False); in chunks of ``chunk`` frames (memory flat in the take's length)."""
+    unknown = ~np.asarray(known, dtype=bool)
+    out = np.empty(len(boxes))
+    for a in range(0, len(boxes), chunk):
+        m = box_masks(boxes[a:a + chunk], unknown.shape, scale)
+        out[a:a + chunk] = 100.0 * (m & unknown).sum(axis=(1, 2)) / np.maximum(m.sum(axis=(1, 2)), 1)
+    return out
 
 
 def background_model(samples: np.ndarray, actor: np.ndarray, min_samples: int) -> tuple[np.ndarray, np.ndarray]:
@@ -172,12 +198,30 @@ def silhouette_clip(clip: VideoClip, points: np.ndarray, tracked: np.ndarray, p:
         rows = np.flatnonzero(fg.any(axis=1))
         bottom[i - clip.start] = (rows[-1] + 1) / p.scale - 0.5 if rows.size else np.nan
     return {"distance": out, "scale": np.asarray(p.scale, dtype=np.float64), "area_px": area, "bottom_px": bottom,
-            "background_known_pct": np.asarray(100.0 * known.mean())}
+            "background_known_pct": np.asarray(100.0 * known.mean()), "unknown_box_pct": unknown_box_pct(known, boxes, p.scale)}
+
+
+def unknown_background_warning(known_pct: float, unknown_box: np.ndarray, tracked: np.ndarray, first_frame: int) -> tuple[str, bool]:
+    """What to say of a background known on ``known_pct`` % of the image only, and whether it is a warning
+    (True) or a log line: it matters where the outline is what places the body, on the frames whose torso
+    patches are unseen (:func:`..skeleton.torso_unseen` of ``tracked`` ``(n, 16)``: the actor's back to the
+    camera), and only where the actor then stands on the unknown background (``unknown_box`` ``(n,)``: % of the
+    frame's actor box there, above :data:`UNKNOWN_BOX_PCT`) for :data:`UNKNOWN_RUN_MIN_FRAMES` frames or more in a
+    row. Frame numbers from ``first_frame``."""
+    unseen = torso_unseen(tracked)
+    runs = runs_of(unseen & (np.asarray(unknown_box) > UNKNOWN_BOX_PCT), min_len=UNKNOWN_RUN_MIN_FRAMES)
+    head = f"the background is known on {known_pct:.0f} % of the image only (the actor stays on the same spot)"
+    if runs:
+        return (f"{head}, and on frames {runs_text(runs, first_frame)}, where no torso patch is seen and the outline "
+                "places the body, the actor stands there: the outline constrains little on those frames (check the overlay)"), True
+    where = (f"where no torso patch is seen ({int(unseen.sum())} frames) the actor stands on it for less than "
+             f"{UNKNOWN_RUN_MIN_FRAMES} frames in a row" if unseen.any() else "the torso's patches are seen on every frame, so the patches place the body")
+    return f"{head}; not needed: {where}", False
 
 
 @node(
     "segment.silhouette",
-    version=1,
+    version=2,
     inputs={"video": VIDEO, "tracks": TRACKS2D},
     outputs={"silhouette": SILHOUETTE},
     params=SilhouetteParams,
@@ -193,6 +237,6 @@ def silhouette(ctx, video, tracks) -> dict:
     known = float(out["background_known_pct"])
     ctx.log(f"background known on {known:.1f} % of the image; silhouette area median {np.median(out['area_px']):.0f} px²")
     if known < 90.0:
-        ctx.warn(f"the background is known on {known:.0f} % of the image only (the actor stays on the same spot): "
-                 "the silhouette constrains nothing there")
+        text, is_warning = unknown_background_warning(known, out["unknown_box_pct"], np.asarray(tr.tracked, dtype=bool), clip.start)
+        (ctx.warn if is_warning else ctx.log)(text)
     return {"silhouette": out}
