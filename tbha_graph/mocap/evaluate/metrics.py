@@ -259,7 +259,7 @@ def compute_metrics(
 
 @node(
     "evaluate.metrics",
-    version=4,
+    version=5,
     inputs={
         "motion": MOTION,
         "tracks": TRACKS2D,
@@ -287,5 +287,6 @@ def metrics(ctx, motion, tracks, camera, truth, raw_motion, extra, exported):
         notes = [w for w in extra.get("warnings", []) if isinstance(w, str)]
         if notes:  # warnings of the node that made the report reach the metrics (and the summary)
             result["warnings"] = list(result.get("warnings", [])) + [w for w in notes if w not in result.get("warnings", [])]
+    result.setdefault("warnings", [])  # always there (docs/metrics.md): an empty list when no node warned
     result["verdict"], result["verdict_reasons"] = verdict(result)  # ok | doubtful | failed (evaluate/verdict.py)
     return {"metrics": result, "errors": errors}
