@@ -16,11 +16,20 @@ take, no scale; the solver as the default pipeline runs it, tracks and silhouett
   0.9, 0.95, 1, 1.05, 1.1. A take that determines its focal length gives the same answer every time; the
   spread shows how much of an estimate is luck (``_at_default`` gives the unscaled run's figures).
 
-    python bench/solver_diagnosis.py [--takes sample,hop131_03_f1000_high]   # a few minutes
+``--perfect-tracks``: the tracker's points replaced by the render's true patch centres wherever the render shows
+the patch (``patch2d``, ``patch_visible``; the head, which has no patch, keeps the tracker's point), to separate
+what the tracks' small biases cost from what the objective and its search cost. Measured on the sample
+(2026-11-27): with the tracker's points the solver's own solution is *cheaper* than the truth's minimum
+(``own_cost_over_truth_minimum_pct`` -4.6: the objective prefers it), with perfect patch centres dearer (+3.5: the
+search misses a better minimum), and both own solutions are about 54-56 mm off where the truth's minimum is 25 mm.
+``--skip-focal-grid``: leave out the five solves with the focal length estimated.
+
+    python bench/solver_diagnosis.py [--takes sample,hop131_03_f1000_high] [--perfect-tracks] [--skip-focal-grid]
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -58,9 +67,24 @@ def seq_mpjpe_mm(joints: np.ndarray, truth_world: np.ndarray) -> float:
     return float(np.linalg.norm(aligned - truth_world, axis=-1).mean() * 1000.0)
 
 
-def diagnose(take: str) -> dict[str, float]:
+def with_true_patches(tr, truth: dict):
+    """``tr`` (:class:`Tracks2D`) with every patched joint's point at the render's true patch centre where the render
+    shows the patch, tracked exactly there (the head keeps the tracker's point)."""
+    from tbha_graph.mocap.skeleton import JOINT_INDEX, PATCHED_JOINTS
+
+    pts, trk = tr.points.copy(), tr.tracked.copy()
+    n = pts.shape[0]
+    cols = [JOINT_INDEX[name] for name in PATCHED_JOINTS]
+    pts[:, cols] = np.asarray(truth["patch2d"])[:n]
+    trk[:, cols] = np.asarray(truth["patch_visible"], dtype=bool)[:n]
+    return dataclasses.replace(tr, points=pts, tracked=trk)
+
+
+def diagnose(take: str, perfect_tracks: bool = False, focal_grid: bool = True) -> dict[str, float]:
     tracks, silhouette, truth = capture_inputs(take)
     tr = read_tracks(tracks)
+    if perfect_tracks:
+        tr = with_true_patches(tr, truth)
     n = tr.n_frames
     sil = None if silhouette is None else st.silhouette_field(silhouette, n)
     lengths = body_lengths(None)
@@ -95,6 +119,8 @@ def diagnose(take: str) -> dict[str, float]:
                                         st.globals_vector(f_true, own_floor[1], False, p.free_lengths), p, 50, False,
                                         (f_true, 1e-4), False, contact, tol=1e-6, silhouette=sil)
     out["own_cost_over_truth_minimum_pct"] = 100.0 * (c_own / c_truth - 1.0)
+    if not focal_grid:
+        return out
     grid = st.SolveTakeParams().focal_grid
     errs, mm = [], []
     for s in GRID_SCALES:
@@ -112,11 +138,13 @@ def main(argv: list[str] | None = None) -> None:
     names = ["sample"] + [t[0] for t in TAKES]
     ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n")[0])
     ap.add_argument("--takes", default=",".join(names), help="comma-separated, of: " + ", ".join(names))
+    ap.add_argument("--perfect-tracks", action="store_true", help="the render's true patch centres in place of the tracker's points")
+    ap.add_argument("--skip-focal-grid", action="store_true", help="leave out the five solves with the focal length estimated")
     args = ap.parse_args(argv)
     for take in args.takes.split(","):
         if take not in names:
             ap.error(f"unknown take {take!r}; choose from {', '.join(names)}")
-        for key, v in diagnose(take).items():
+        for key, v in diagnose(take, args.perfect_tracks, not args.skip_focal_grid).items():
             print(f"{take}_{key}={v:.1f}", flush=True)
 
 
