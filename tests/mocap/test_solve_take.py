@@ -454,3 +454,25 @@ def test_report_holds_no_timing_so_the_metrics_key_is_stable(tmp_path, monkeypat
     assert first["reconstruct"].status == second["reconstruct"].status == "ran"
     assert first["reconstruct"].fingerprints["report"] == second["reconstruct"].fingerprints["report"]
     assert first["metrics"].key == second["metrics"].key
+
+
+def test_an_interrupted_run_stops_the_solver_between_iterations(truth):
+    """Ctrl-C while the solver runs in a worker thread (tbha-run --jobs 2) sets the run's cancel event: the next
+    Levenberg-Marquardt iteration raises Cancelled (a KeyboardInterrupt) instead of the solve running to its end."""
+    import threading
+
+    from tbha_graph.core.node import CANCEL, Cancelled
+
+    P, uv, centre, L = synthetic(truth, 20)
+    prob, d = problem(truth, P, uv, centre, L, WEAK, focal_prior=(700.0, 1e-5))
+    x = np.concatenate([globals_vector(700.0, d, False), pack_initial(P, prob.ref)])
+    event = threading.Event()
+    token = CANCEL.set(event)
+    try:
+        levenberg_marquardt(prob, x, 2)  # not interrupted: runs
+        event.set()
+        with pytest.raises(Cancelled):
+            levenberg_marquardt(prob, x, 2)
+    finally:
+        CANCEL.reset(token)
+    levenberg_marquardt(prob, x, 2)  # outside a run (no cancel event): runs

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...core.node import checkpoint
 from ..runs import runs_of
 from ..skeleton import N_JOINTS, PARENTS
 from .take_jacobian import global_jacobian, joint_jacobian, length_jacobian, residual_jacobian
@@ -233,7 +234,8 @@ def normal_equations(prob: "TakeProblem", x: np.ndarray, r: np.ndarray | None = 
 def levenberg_marquardt(prob: "TakeProblem", x0: np.ndarray, max_iterations: int = 30, tol: float = 1e-5):
     """Minimise ``0.5 |prob.residuals(x)|²`` by Levenberg–Marquardt on the block normal equations
     (:func:`normal_equations`, :meth:`Normal.solve`), re-centring the tangent references after every
-    accepted step. Returns ``(x, cost, iterations, normal equations at the last linearisation)``."""
+    accepted step, and :func:`tbha_graph.core.node.checkpoint` before each iteration (an interrupted run stops
+    here). Returns ``(x, cost, iterations, normal equations at the last linearisation)``."""
     from scipy.linalg import LinAlgError
 
     x = prob.recentre(x0)
@@ -242,6 +244,7 @@ def levenberg_marquardt(prob: "TakeProblem", x0: np.ndarray, max_iterations: int
     rel = 1.0
     ne, r = None, None
     for it in range(1, max_iterations + 1):
+        checkpoint()  # Ctrl-C with --jobs > 1 stops the solve here (its node runs in a worker thread)
         ne = None  # the previous linearisation freed before the next is built
         ne, cost = normal_equations(prob, x, r)
         improved = False
