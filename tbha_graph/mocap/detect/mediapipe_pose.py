@@ -407,13 +407,14 @@ def prefetched_rgb_frames_range(video: VideoClip, start: int, stop: int) -> Iter
         yield index, cv2.cvtColor(frame, cv2.COLOR_BGR2RGB)
 
 
-@node("detect.mediapipe_pose", version=6,
+@node("detect.mediapipe_pose", version=7,
       inputs={"video": VIDEO,
               "suit": optional(TRACKS2D, "a suit tracker's tracks on the same video: with frames 'torso_unseen', Pose runs "
                                          "only where they see no torso patch")},
       outputs={"tracks": TRACKS2D, "motion": MOTION,
                "report": report_port("frames run, detected and tracked backwards, frames whose left/right labels were "
-                                     "swapped back (arms, legs, face), detection and wall time per frame")},
+                                     "swapped back (arms, legs, face); no timings (the log has them): a report is data, "
+                                     "hashed into the cache keys of the nodes it feeds")},
       params=MediaPipePoseParams)
 def mediapipe_pose(ctx, video, suit=None):
     """2D joint tracks (and world-landmark 3D motion) from MediaPipe Pose run on the video (optional mediapipe)."""
@@ -484,7 +485,5 @@ def mediapipe_pose(ctx, video, suit=None):
         "motion": motion,
         "report": {"frames": int(len(detected)), "frames_run": int(ran), "frames_detected": int(detected.sum()),
                    "backfilled_frames": int(timing["backfilled_frames"]),
-                   "swapped_frames": {g: int(swaps[g].sum()) for g in GROUPS},
-                   "detect_ms_per_frame": round(timing["detect_ms_per_frame"], 2),
-                   "wall_ms_per_frame": round(timing["wall_ms_per_frame"], 2)},
+                   "swapped_frames": {g: int(swaps[g].sum()) for g in GROUPS}},
     }
