@@ -71,8 +71,8 @@ from ..io.mediapipe_keypoints import MediaPipeTake, tracks_from_mediapipe
 from ..io.mediapipe_world import MEDIAPIPE_TO_WORLD, motion_from_mediapipe
 from ..io.video import iter_frames
 from ..ports import MOTION, TRACKS2D, VIDEO, VideoClip, report_port
-from ..reconstruct.take_model import PELVIS_JOINTS, THORAX_JOINTS, fronts, torso_unseen
-from ..skeleton import JOINT_NAMES, N_JOINTS
+from ..reconstruct.take_model import PELVIS_JOINTS, THORAX_JOINTS, fronts
+from ..skeleton import JOINT_NAMES, N_JOINTS, torso_unseen
 from ..track.common import DOUBT
 from .landmark_offsets import load_mediapipe_offsets
 from .left_right import GROUPS, apply_sides, consistent_sides
@@ -331,7 +331,7 @@ def detect_landmarks(ctx, video: VideoClip, p: MediaPipePoseParams,
 
 def unseen_torso_runs(suit: dict, n_frames: int, margin: int) -> tuple[list[tuple[int, int]], int]:
     """``[a, b)`` frame ranges where the suit's tracks (a ``TRACKS2D`` value) see no torso patch
-    (:func:`.take_model.torso_unseen`), each widened by ``margin`` frames either side (overlaps merged), and the
+    (:func:`..skeleton.torso_unseen`), each widened by ``margin`` frames either side (overlaps merged), and the
     number of frames without a torso patch."""
     from ..bundles.tracks import read_tracks
     from ..runs import runs_of

@@ -101,10 +101,10 @@ from ..bundles.tracks import read_tracks
 from ..calibrate.pnp import solve_pnp_planar
 from ..camera import Camera
 from ..ports import BODY, CAMERA, LENS, MOTION, SIDES, SILHOUETTE, TRACKS2D, report_port
-from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS
+from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS, TORSO_JOINTS, torso_unseen
 from ..body import DEFAULT_ANKLE_HEIGHT, body_lengths, lengths_to_body, tpose_on_floor
-from .take_model import (ANKLES, DEFAULT_POINT_OFFSETS, TORSO_JOINTS, TORSO_PAIRS, SilhouetteField, TakeData, TakeProblem, Weights,
-                         bone_directions, fronts, pack_initial, point_positions, seat_on_outline, torso_unseen, unit)
+from .take_model import (ANKLES, DEFAULT_POINT_OFFSETS, TORSO_PAIRS, SilhouetteField, TakeData, TakeProblem, Weights,
+                         bone_directions, fronts, pack_initial, point_positions, seat_on_outline, unit)
 from .take_solver import levenberg_marquardt
 from .take_solver import search_sides_lm as search_sides
 from .take_solver import search_turns_lm

@@ -30,7 +30,7 @@ from functools import cached_property
 
 import numpy as np
 
-from ..skeleton import JOINT_INDEX, N_JOINTS, PARENTS, TORSO_JOINTS, topological_order, torso_unseen  # noqa: F401 (re-exported)
+from ..skeleton import JOINT_INDEX, N_JOINTS, PARENTS, TORSO_JOINTS, topological_order, torso_unseen
 
 J = JOINT_INDEX
 ORDER = topological_order()[1:]  # bones (by child joint) in an order where parents come first
