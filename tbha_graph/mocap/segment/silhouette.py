@@ -28,10 +28,11 @@ silhouette's area in full-resolution pixels², ``bottom_px`` ``(n_frames,)`` the
 its lowest pixel (the sole of the lower foot; NaN on an empty frame), ``background_known_pct``, ``unknown_box_pct``
 ``(n_frames,)`` the % of each frame's actor box where the background is unknown.
 
-A background known on less than 90 % of the image (the actor stays on one spot: what is behind them is never
-seen) is a warning only where it matters (:func:`unknown_background_warning`): on a run of frames whose torso
-patches are unseen (the actor's back to the camera), where the outline is what places the body, with the actor
-standing on the unknown part; otherwise a log line (the sample: its torso is seen on every frame).
+Where the actor stays on one spot, what is behind them is never seen (painted in). That is a warning only where
+it matters (:func:`unknown_background_warning`): on a run of frames whose torso patches are unseen (the actor's
+back to the camera), where the outline is what places the body, with the actor standing on the unknown part;
+a background known on less than 90 % of the image is otherwise a log line (the sample: its torso is seen on
+every frame).
 """
 from __future__ import annotations
 
@@ -201,22 +202,29 @@ def silhouette_clip(clip: VideoClip, points: np.ndarray, tracked: np.ndarray, p:
             "background_known_pct": np.asarray(100.0 * known.mean()), "unknown_box_pct": unknown_box_pct(known, boxes, p.scale)}
 
 
-def unknown_background_warning(known_pct: float, unknown_box: np.ndarray, tracked: np.ndarray, first_frame: int) -> tuple[str, bool]:
-    """What to say of a background known on ``known_pct`` % of the image only, and whether it is a warning
-    (True) or a log line: it matters where the outline is what places the body, on the frames whose torso
-    patches are unseen (:func:`..skeleton.torso_unseen` of ``tracked`` ``(n, 16)``: the actor's back to the
-    camera), and only where the actor then stands on the unknown background (``unknown_box`` ``(n,)``: % of the
-    frame's actor box there, above :data:`UNKNOWN_BOX_PCT`) for :data:`UNKNOWN_RUN_MIN_FRAMES` frames or more in a
-    row. Frame numbers from ``first_frame``."""
+def unknown_background_warning(known_pct: float, unknown_box: np.ndarray, tracked: np.ndarray,
+                               first_frame: int) -> tuple[str, bool] | None:
+    """What to say of the background the take never shows (``known_pct`` % of the image known), and whether it is
+    a warning (True) or a log line, or None (nothing to say). It matters where the outline is what places the body:
+    on the frames whose torso patches are unseen (:func:`..skeleton.torso_unseen` of ``tracked`` ``(n, 16)``: the
+    actor's back to the camera), and only where the actor then stands on the unknown background (``unknown_box``
+    ``(n,)``: % of the frame's actor box there, above :data:`UNKNOWN_BOX_PCT`) for :data:`UNKNOWN_RUN_MIN_FRAMES`
+    frames or more in a row: a warning naming them, however much of the whole image is known (an actor turning on
+    one spot leaves little of it unknown). Otherwise a background known on less than 90 % of the image is a log line
+    saying why it does not matter. Frame numbers from ``first_frame``."""
     unseen = torso_unseen(tracked)
     runs = runs_of(unseen & (np.asarray(unknown_box) > UNKNOWN_BOX_PCT), min_len=UNKNOWN_RUN_MIN_FRAMES)
-    head = f"the background is known on {known_pct:.0f} % of the image only (the actor stays on the same spot)"
     if runs:
-        return (f"{head}, and on frames {runs_text(runs, first_frame)}, where no torso patch is seen and the outline "
-                "places the body, the actor stands there: the outline constrains little on those frames (check the overlay)"), True
+        return (f"on frames {runs_text(runs, first_frame)} no torso patch is seen, so the actor's outline places the body, "
+                f"and the actor stands where the background is never seen ({known_pct:.0f} % of the image is known): the "
+                "outline there is found against a painted-in background, which a textured wall makes unreliable "
+                "(check the overlay)"), True
+    if known_pct >= 90.0:
+        return None
     where = (f"where no torso patch is seen ({int(unseen.sum())} frames) the actor stands on it for less than "
              f"{UNKNOWN_RUN_MIN_FRAMES} frames in a row" if unseen.any() else "the torso's patches are seen on every frame, so the patches place the body")
-    return f"{head}; not needed: {where}", False
+    return (f"the background is known on {known_pct:.0f} % of the image only (the actor stays on the same spot); "
+            f"not needed: {where}"), False
 
 
 @node(
@@ -236,7 +244,7 @@ def silhouette(ctx, video, tracks) -> dict:
     out = silhouette_clip(clip, pts, np.asarray(tr.tracked, dtype=bool), p)
     known = float(out["background_known_pct"])
     ctx.log(f"background known on {known:.1f} % of the image; silhouette area median {np.median(out['area_px']):.0f} px²")
-    if known < 90.0:
-        text, is_warning = unknown_background_warning(known, out["unknown_box_pct"], np.asarray(tr.tracked, dtype=bool), clip.start)
-        (ctx.warn if is_warning else ctx.log)(text)
+    said = unknown_background_warning(known, out["unknown_box_pct"], np.asarray(tr.tracked, dtype=bool), clip.start)
+    if said is not None:
+        (ctx.warn if said[1] else ctx.log)(said[0])
     return {"silhouette": out}
