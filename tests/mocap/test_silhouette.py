@@ -137,3 +137,25 @@ def test_the_node_warns_only_when_the_back_is_turned_on_unknown_background():
         warnings.append(list(ctx.warnings))
     assert warnings[0] == []
     assert len(warnings[1]) == 1 and "frames 100-139" in warnings[1][0]
+
+
+def test_an_interrupted_run_stops_the_node_at_its_next_frame():
+    """Ctrl-C with nodes in worker threads (tbha-run --jobs 2) sets the run's cancel event: segment.silhouette stops
+    at its next frame (its two passes over the video go through ctx.progress) instead of reading the take twice."""
+    import threading
+
+    from tbha_graph.core.node import CANCEL, Cancelled, Context
+    from tbha_graph.mocap.segment.silhouette import silhouette
+
+    with np.load(TRUTH, allow_pickle=False) as z:
+        pts = z["joints2d"].astype(np.float64)
+    tracks = {"points": pts, "tracked": np.ones(pts.shape[:2], bool), "fps": np.asarray(30.0),
+              "width": np.asarray(640), "height": np.asarray(480)}
+    event = threading.Event()
+    event.set()
+    token = CANCEL.set(event)
+    try:
+        with pytest.raises(Cancelled):
+            silhouette.fn(Context("segment.silhouette", SilhouetteParams(), work_dir=ROOT), video=probe_video(VIDEO), tracks=tracks)
+    finally:
+        CANCEL.reset(token)

@@ -173,9 +173,12 @@ def distance_outside(fg: np.ndarray) -> np.ndarray:
     return np.minimum(np.rint(d), 255).astype(np.uint8)
 
 
-def silhouette_clip(clip: VideoClip, points: np.ndarray, tracked: np.ndarray, p: SilhouetteParams) -> dict[str, np.ndarray]:
+def silhouette_clip(clip: VideoClip, points: np.ndarray, tracked: np.ndarray, p: SilhouetteParams,
+                    progress=None) -> dict[str, np.ndarray]:
     """The silhouette bundle of ``clip`` (see the module docstring); ``points`` ``(n, 16, 2)`` the 2D tracks,
-    full-resolution pixels, ``tracked`` ``(n, 16)`` bool."""
+    full-resolution pixels, ``tracked`` ``(n, 16)`` bool; ``progress`` (optional, as ``ctx.progress``: wraps an
+    iterable) shows the two passes over the video, and an interrupted run stops at its next frame."""
+    steps = (lambda it, desc: it) if progress is None else (lambda it, desc: progress(it, total=clip.n_frames, desc=desc))
     n = clip.n_frames
     if points.shape[0] != n:
         raise NodeError(f"the tracks have {points.shape[0]} frames, the video {n}",
@@ -183,14 +186,14 @@ def silhouette_clip(clip: VideoClip, points: np.ndarray, tracked: np.ndarray, p:
     pick = np.unique(np.linspace(0, n - 1, min(p.background_samples, n)).round().astype(int))
     picked = set(int(k) for k in pick)
     samples = []
-    for i, frame in iter_frames(clip):
+    for i, frame in steps(iter_frames(clip), "silhouette: background"):
         if i - clip.start in picked:
             samples.append(_small(frame, p.scale))
     samples = np.stack(samples)
     boxes = body_boxes(points, tracked, p.track_margin)
     bg, known = background_model(samples, box_masks(boxes[pick], samples.shape[1:3], p.scale), p.min_background_samples)
     out, area, bottom = None, np.zeros(n), np.full(n, np.nan)
-    for i, frame in iter_frames(clip):
+    for i, frame in steps(iter_frames(clip), "silhouette: outline"):
         fg = foreground(_small(frame, p.scale), bg, p)
         if out is None:
             out = np.empty((n,) + fg.shape, dtype=np.uint8)
@@ -241,7 +244,7 @@ def silhouette(ctx, video, tracks) -> dict:
     clip = VideoClip.model_validate(video) if isinstance(video, dict) else video
     tr = read_tracks(tracks)
     pts = np.asarray(tr.points, dtype=np.float64)
-    out = silhouette_clip(clip, pts, np.asarray(tr.tracked, dtype=bool), p)
+    out = silhouette_clip(clip, pts, np.asarray(tr.tracked, dtype=bool), p, progress=ctx.progress)
     known = float(out["background_known_pct"])
     ctx.log(f"background known on {known:.1f} % of the image; silhouette area median {np.median(out['area_px']):.0f} px²")
     said = unknown_background_warning(known, out["unknown_box_pct"], np.asarray(tr.tracked, dtype=bool), clip.start)
