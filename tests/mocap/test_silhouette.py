@@ -116,27 +116,33 @@ def test_an_unknown_background_warns_only_where_the_outline_places_the_body():
     assert unknown_background_warning(85.0, unknown, short, first_frame=0)[1]
 
 
+def _true_joint_tracks() -> dict:
+    """The sample's true 2D joints as a TRACKS2D value, every joint tracked."""
+    with np.load(TRUTH, allow_pickle=False) as z:
+        pts = z["joints2d"].astype(np.float64)
+    return {"points": pts, "tracked": np.ones(pts.shape[:2], bool), "fps": np.asarray(30.0),
+            "width": np.asarray(640), "height": np.asarray(480)}
+
+
+def _run_silhouette(tracks: dict):
+    """segment.silhouette run on the sample's video with ``tracks``; returns its Context (warnings, logs)."""
+    from tbha_graph.core.node import Context
+    from tbha_graph.mocap.segment.silhouette import silhouette
+
+    ctx = Context("segment.silhouette", SilhouetteParams(), work_dir=ROOT)
+    silhouette.fn(ctx, video=probe_video(VIDEO), tracks=tracks)
+    return ctx
+
+
 def test_the_node_warns_only_when_the_back_is_turned_on_unknown_background():
     """segment.silhouette on the sample's video: its torso is seen on every frame, so the unknown background is a log
     line and the node gives no warning; the same take with the torso's patches lost on frames 100-139 warns, naming
     them."""
-    from tbha_graph.core.node import Context
-    from tbha_graph.mocap.segment.silhouette import SilhouetteParams, silhouette
-
-    with np.load(TRUTH, allow_pickle=False) as z:
-        pts = z["joints2d"].astype(np.float64)
-    tracks = {"points": pts, "tracked": np.ones(pts.shape[:2], bool), "fps": np.asarray(30.0),
-              "width": np.asarray(640), "height": np.asarray(480)}
-    warnings = []
-    for hide in (False, True):
-        tr = dict(tracks, tracked=tracks["tracked"].copy())
-        if hide:
-            tr["tracked"][100:140, TORSO_JOINTS] = False
-        ctx = Context("segment.silhouette", SilhouetteParams(), work_dir=ROOT)
-        silhouette.fn(ctx, video=probe_video(VIDEO), tracks=tr)
-        warnings.append(list(ctx.warnings))
-    assert warnings[0] == []
-    assert len(warnings[1]) == 1 and "frames 100-139" in warnings[1][0]
+    tracks = _true_joint_tracks()
+    assert _run_silhouette(tracks).warnings == []
+    tracks["tracked"][100:140, TORSO_JOINTS] = False
+    warnings = _run_silhouette(tracks).warnings
+    assert len(warnings) == 1 and "frames 100-139" in warnings[0]
 
 
 def test_an_interrupted_run_stops_the_node_at_its_next_frame():
@@ -144,18 +150,13 @@ def test_an_interrupted_run_stops_the_node_at_its_next_frame():
     at its next frame (its two passes over the video go through ctx.progress) instead of reading the take twice."""
     import threading
 
-    from tbha_graph.core.node import CANCEL, Cancelled, Context
-    from tbha_graph.mocap.segment.silhouette import silhouette
+    from tbha_graph.core.node import CANCEL, Cancelled
 
-    with np.load(TRUTH, allow_pickle=False) as z:
-        pts = z["joints2d"].astype(np.float64)
-    tracks = {"points": pts, "tracked": np.ones(pts.shape[:2], bool), "fps": np.asarray(30.0),
-              "width": np.asarray(640), "height": np.asarray(480)}
     event = threading.Event()
     event.set()
     token = CANCEL.set(event)
     try:
         with pytest.raises(Cancelled):
-            silhouette.fn(Context("segment.silhouette", SilhouetteParams(), work_dir=ROOT), video=probe_video(VIDEO), tracks=tracks)
+            _run_silhouette(_true_joint_tracks())
     finally:
         CANCEL.reset(token)
