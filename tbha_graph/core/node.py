@@ -54,7 +54,11 @@ def checkpoint() -> None:
     """Raise :class:`Cancelled` if the run this code belongs to was interrupted (Ctrl-C while nodes run in worker
     threads, ``--jobs`` above 1); else nothing (a few hundred nanoseconds). For long computations with no
     ``ctx.progress`` step, such as an optimiser's iterations: call it once per iteration."""
-    cancel = CANCEL.get()
+    _raise_if_set(CANCEL.get())
+
+
+def _raise_if_set(cancel) -> None:
+    """Raise :class:`Cancelled` if ``cancel`` (a ``threading.Event`` or None) is set."""
     if cancel is not None and cancel.is_set():
         raise Cancelled("interrupted")
 
@@ -63,8 +67,7 @@ def _cancellable(it: Iterator[T], cancel) -> Iterator[T]:
     """``it``'s items until ``cancel`` (a ``threading.Event``) is set, then :class:`Cancelled`; ``it`` closed either way."""
     try:
         for item in it:
-            if cancel.is_set():
-                raise Cancelled("interrupted")
+            _raise_if_set(cancel)
             yield item
     finally:
         close = getattr(it, "close", None)

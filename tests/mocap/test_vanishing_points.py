@@ -85,3 +85,32 @@ def test_a_plain_room_gives_no_lens_and_a_warning_the_run_reports(tmp_path):
     assert lens.focal_px is None and "too few" in lens.source
     assert any(w["node"] == "lens" and "no focal length from the room" in w["message"] for w in run.node_warnings())
     assert cv2.imread(str(tmp_path / "run" / "room_lines.png")).shape == (240, 320, 3)
+
+
+def test_the_background_frames_go_through_progress_and_an_interrupted_run_stops():
+    """The room's background is read frame by frame through ``progress`` (a bar on a long take); with the run's
+    cancel event set (Ctrl-C under ``tbha-run --jobs 2``) the bootstrap stops at its next resample."""
+    import threading
+
+    from tbha_graph.core.node import CANCEL, Cancelled
+
+    clip = VideoClip(path=str(ROOT / "data" / "sample" / "sample.mp4"), sha256="-", stop=210, fps=30.0, width=640,
+                     height=480)
+    seen = []
+
+    def progress(items, total=None, desc=""):
+        seen.append((total, desc))
+        yield from items
+
+    background = median_background(clip, 5, progress)
+    assert seen == [(5, "room background")] and background.shape == (480, 640, 3)
+    image = tiled_floor((-1.0, 0.9, 5.0), (0.0, 0.5, 0.0), 500.0)
+    event = threading.Event()
+    event.set()
+    token = CANCEL.set(event)
+    try:
+        with pytest.raises(Cancelled):
+            estimate_focal(image, VanishingParams())
+    finally:
+        CANCEL.reset(token)
+    assert estimate_focal(image, VanishingParams())["focal_px"] is not None  # the same call without the event runs

@@ -36,7 +36,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.atomic import atomic_write_bytes
-from ...core.node import node
+from ...core.node import checkpoint, node
 from ..bundles.lens import LensEstimate
 from ..io.video import iter_frames
 from ..ports import IMAGE, LENS, REPORT, VIDEO
@@ -63,9 +63,13 @@ class VanishingParams(BaseModel):
     seed: int = Field(0, ge=0, description="random seed of RANSAC and the bootstrap")
 
 
-def median_background(clip, samples: int) -> np.ndarray:
-    """Per-pixel median ``(H, W, 3)`` uint8 of ``samples`` frames spread evenly over ``clip`` (each one seeked)."""
+def median_background(clip, samples: int, progress=None) -> np.ndarray:
+    """Per-pixel median ``(H, W, 3)`` uint8 of ``samples`` frames spread evenly over ``clip`` (each one seeked);
+    ``progress`` (optional) wraps the frames' iterable as ``ctx.progress`` does (shown, and an interrupted run
+    stops at the next frame)."""
     picks = np.unique(np.linspace(clip.start, clip.stop - 1, min(samples, clip.n_frames)).round().astype(int))
+    if progress is not None:
+        picks = progress(picks, total=len(picks), desc="room background")
     frames = [frame for i in picks for _, frame in iter_frames(clip, int(i), int(i) + 1)]
     return np.median(np.stack(frames), axis=0).astype(np.uint8)
 
@@ -229,6 +233,7 @@ def estimate_focal(image: np.ndarray, p: VanishingParams) -> dict:
     up = -np.sign(D[1, 2]) * D[:, 2]  # the floor's normal, pointing up (camera y is down)
     boot, tilt = [], []
     for _ in range(p.bootstrap):
+        checkpoint()  # an interrupted run (Ctrl-C with --jobs > 1) stops here
         ia = rng.choice(fams[a], len(fams[a]))
         ib = rng.choice(fams[b], len(fams[b]))
         fb, Db, _ = manhattan_fit(seg, ia, ib, points[a], points[b], f, centre, p)
@@ -277,7 +282,7 @@ def vanishing_points(ctx, video) -> dict:
     import cv2
 
     p: VanishingParams = ctx.params
-    background = median_background(video, p.samples)
+    background = median_background(video, p.samples, ctx.progress)
     found = estimate_focal(background, p)
     f, sd = found["focal_px"], found["focal_sd_pct"]
     if f is not None and sd is not None and sd <= p.max_sd_pct:
