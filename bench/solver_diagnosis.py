@@ -23,8 +23,13 @@ what the tracks' small biases cost from what the objective and its search cost. 
 (``own_cost_over_truth_minimum_pct`` -4.6: the objective prefers it), with perfect patch centres dearer (+3.5: the
 search misses a better minimum), and both own solutions are about 54-56 mm off where the truth's minimum is 25 mm.
 ``--skip-focal-grid``: leave out the five solves with the focal length estimated.
+``--terms``: where the two minima differ, as ``<take>_own_minus_truth_minimum_<term>=`` for each of the objective's
+terms, ``..._reprojection_<joint>=`` and ``..._reprojection_frames_<a>_<b>=`` (30-frame blocks). On the sample
+(2026-11-27, tracker's points) the own solution's reprojection is 23.7 lower (207.1 at the truth's minimum) and every
+other term within 1.7: the pelvis patches (hips -8.9, chest -5.8, right hip -5.1) on frames 60-74 (-13.3), where
+the right hip's and the hips' patches overlap in the image and their blobs' centres move with what each hides.
 
-    python bench/solver_diagnosis.py [--takes sample,hop131_03_f1000_high] [--perfect-tracks] [--skip-focal-grid]
+    python bench/solver_diagnosis.py [--takes sample,hop131_03_f1000_high] [--perfect-tracks] [--skip-focal-grid] [--terms]
 """
 from __future__ import annotations
 
@@ -48,6 +53,7 @@ from tbha_graph.mocap.body import body_lengths  # noqa: E402
 from tbha_graph.mocap.bundles.tracks import read_tracks  # noqa: E402
 from tbha_graph.mocap.evaluate.measures import align_clip  # noqa: E402
 from tbha_graph.mocap.reconstruct import solve_take as st  # noqa: E402
+from tbha_graph.mocap.skeleton import JOINT_NAMES  # noqa: E402
 
 GRID_SCALES = (0.9, 0.95, 1.0, 1.05, 1.1)
 
@@ -80,7 +86,15 @@ def with_true_patches(tr, truth: dict):
     return dataclasses.replace(tr, points=pts, tracked=trk)
 
 
-def diagnose(take: str, perfect_tracks: bool = False, focal_grid: bool = True) -> dict[str, float]:
+def reprojection_by_joint(prob, x) -> np.ndarray:
+    """Half squared reprojection residuals ``(n, 16)`` per frame and joint of a solved problem (the objective's
+    ``reprojection`` term, :meth:`TakeProblem.frame_terms` rows 0..31: each joint's point u, v)."""
+    P = prob.solution(x)[4]
+    F = prob.frame_terms(P, prob.globals_of(x))
+    return 0.5 * (F[:, :2 * len(JOINT_NAMES)] ** 2).reshape(len(P), len(JOINT_NAMES), 2).sum(axis=-1)
+
+
+def diagnose(take: str, perfect_tracks: bool = False, focal_grid: bool = True, terms: bool = False) -> dict[str, float]:
     tracks, silhouette, truth = capture_inputs(take)
     tr = read_tracks(tracks)
     if perfect_tracks:
@@ -114,11 +128,21 @@ def diagnose(take: str, perfect_tracks: bool = False, focal_grid: bool = True) -
     # is the truth's minimum cheaper than the solver's own? polish the own solution the same way and compare
     cam = given["camera"]
     own_floor = (cam.R[:, 1], float(-cam.R[:, 1] @ cam.t))
-    _, _, c_own, _, _ = st.solve_frames(tr.points, tr.tracked.astype(np.float64), lengths, centre, float(tr.fps),
+    prob_own, x_own, c_own, _, _ = st.solve_frames(tr.points, tr.tracked.astype(np.float64), lengths, centre, float(tr.fps),
                                         given["camera_frame_joints"], own_floor,
                                         st.globals_vector(f_true, own_floor[1], False, p.free_lengths), p, 50, False,
                                         (f_true, 1e-4), False, contact, tol=1e-6, silhouette=sil)
     out["own_cost_over_truth_minimum_pct"] = 100.0 * (c_own / c_truth - 1.0)
+    if terms:  # which terms and which joints' reprojections make the difference (own minus the truth's minimum)
+        t_truth, t_own = prob.term_costs(x), prob_own.term_costs(x_own)
+        for k in t_truth:
+            out[f"own_minus_truth_minimum_{k}"] = t_own[k] - t_truth[k]
+        rep_truth, rep_own = reprojection_by_joint(prob, x), reprojection_by_joint(prob_own, x_own)
+        for j, name in enumerate(JOINT_NAMES):
+            out[f"own_minus_truth_minimum_reprojection_{name}"] = float(rep_own[:, j].sum() - rep_truth[:, j].sum())
+        diff = (rep_own - rep_truth).sum(axis=1)
+        for a in range(0, n, 30):
+            out[f"own_minus_truth_minimum_reprojection_frames_{a}_{min(a + 30, n) - 1}"] = float(diff[a:a + 30].sum())
     if not focal_grid:
         return out
     grid = st.SolveTakeParams().focal_grid
@@ -140,11 +164,13 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--takes", default=",".join(names), help="comma-separated, of: " + ", ".join(names))
     ap.add_argument("--perfect-tracks", action="store_true", help="the render's true patch centres in place of the tracker's points")
     ap.add_argument("--skip-focal-grid", action="store_true", help="leave out the five solves with the focal length estimated")
+    ap.add_argument("--terms", action="store_true", help="the objective's terms, each joint's reprojection and each 30 "
+                    "frames' reprojection at the solver's own solution minus at the truth's minimum")
     args = ap.parse_args(argv)
     for take in args.takes.split(","):
         if take not in names:
             ap.error(f"unknown take {take!r}; choose from {', '.join(names)}")
-        for key, v in diagnose(take, args.perfect_tracks, not args.skip_focal_grid).items():
+        for key, v in diagnose(take, args.perfect_tracks, not args.skip_focal_grid, args.terms).items():
             print(f"{take}_{key}={v:.1f}", flush=True)
 
 
