@@ -1,7 +1,6 @@
 """BVH reading/writing: real CMU clips, hand-made unusual files, an independent oracle, malformed files."""
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +9,6 @@ from pydantic import ValidationError
 from scipy.spatial.transform import Rotation
 
 from tbha_graph.core.errors import NodeError
-from tbha_graph.mocap.io import bvh as bvh_module
 from tbha_graph.mocap.io.bvh import (
     Bvh,
     BvhError,
@@ -99,33 +97,6 @@ def test_gimbal_lock_gives_the_rotation_and_warns_nothing(order: str, no_hidden_
     np.testing.assert_allclose(built.motion[:, 6:], LOCKED_BACK, atol=1e-9)
     back, _ = bvh_to_local(built)
     np.testing.assert_allclose(np.abs(np.sum(back[:, 1] * q, axis=-1)), 1.0, atol=1e-12)  # the same rotations
-
-
-def test_gimbal_lock_on_a_scipy_without_suppress_warnings(monkeypatch) -> None:
-    """scipy < 1.17 (as_euler without suppress_warnings, always warning at gimbal lock): the same angles and
-    no warning reaches the caller; a scipy that has the argument is recognised."""
-    import scipy
-
-    assert bvh_module._as_euler_can_be_quiet() == (tuple(int(v) for v in scipy.__version__.split(".")[:2]) >= (1, 17))
-    q = Rotation.from_euler("ZXY", LOCKED, degrees=True).as_quat()
-    real = Rotation.as_euler
-
-    def old_as_euler(self, seq, degrees=False):
-        return real(self, seq, degrees)
-
-    try:
-        with monkeypatch.context() as mp, warnings.catch_warnings():
-            warnings.simplefilter("error")
-            if bvh_module._as_euler_can_be_quiet():  # scipy >= 1.17: a stand-in for an older one
-                mp.setattr(Rotation, "as_euler", old_as_euler)
-                bvh_module._as_euler_can_be_quiet.cache_clear()
-            with pytest.raises(UserWarning, match="Gimbal lock"):
-                Rotation.from_quat(q).as_euler("ZXY", degrees=True)  # as scipy < 1.17 does
-            assert not bvh_module._as_euler_can_be_quiet()
-            eul = quat_to_euler(q, "ZXY")
-    finally:
-        bvh_module._as_euler_can_be_quiet.cache_clear()
-    np.testing.assert_allclose(eul, LOCKED_BACK, atol=1e-9)
 
 
 def test_agrees_with_bvhio_on_cmu(tmp_path: Path) -> None:

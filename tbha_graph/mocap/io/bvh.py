@@ -20,10 +20,7 @@ and what was expected, and nothing partial is returned. The writer is atomic and
 """
 from __future__ import annotations
 
-import functools
-import inspect
 import re
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
@@ -474,17 +471,6 @@ def _check_order(order: str) -> str:
     return up
 
 
-@functools.cache
-def _as_euler_can_be_quiet() -> bool:
-    """Whether this scipy's ``Rotation.as_euler`` takes ``suppress_warnings`` (scipy >= 1.17)."""
-    from scipy.spatial.transform import Rotation
-
-    try:
-        return "suppress_warnings" in inspect.signature(Rotation.as_euler).parameters
-    except (TypeError, ValueError):  # a compiled method without a signature (older scipy)
-        return False
-
-
 def quat_to_euler(q: np.ndarray, order: str) -> np.ndarray:
     """Euler angles ``(..., 3)`` degrees, intrinsic, in the channel order ``order`` (a permutation of
     ``"XYZ"``, e.g. ``"ZXY"``: ``R = Rz(a) @ Rx(b) @ Ry(c)``), of quaternions ``q`` ``(..., 4)`` xyzw: the
@@ -495,12 +481,9 @@ def quat_to_euler(q: np.ndarray, order: str) -> np.ndarray:
     q = np.asarray(q, dtype=np.float64)
     r = Rotation.from_quat(q.reshape(-1, 4))
     order = _check_order(order)
-    if _as_euler_can_be_quiet():
-        eul = r.as_euler(order, degrees=True, suppress_warnings=True)
-    else:  # scipy < 1.17 always warns at gimbal lock; catch_warnings is process-wide, not thread-safe
-        with warnings.catch_warnings():  # (before Python 3.14): it may hide or reset another thread's filters
-            warnings.simplefilter("ignore", UserWarning)
-            eul = r.as_euler(order, degrees=True)
+    # scipy >= 1.17 (the floor in pyproject.toml) can be told not to warn at gimbal lock: no process-wide
+    # warnings.catch_warnings, which is not thread-safe before Python 3.14 and nodes run in threads
+    eul = r.as_euler(order, degrees=True, suppress_warnings=True)
     return eul.reshape(q.shape[:-1] + (3,))
 
 
