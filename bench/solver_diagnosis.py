@@ -26,8 +26,9 @@ search misses a better minimum), and both own solutions are about 54-56 mm off w
 ``--terms``: where the two minima differ, as ``<take>_own_minus_truth_minimum_<term>=`` for each of the objective's
 terms, ``..._reprojection_<joint>=`` and ``..._reprojection_frames_<a>_<b>=`` (30-frame blocks). On the sample
 (2026-11-27, tracker's points) the own solution's reprojection is 23.7 lower (207.1 at the truth's minimum) and every
-other term within 1.7: the pelvis patches (hips -8.9, chest -5.8, right hip -5.1) on frames 60-74 (-13.3), where
-the right hip's and the hips' patches overlap in the image and their blobs' centres move with what each hides.
+other term within 1.7: the pelvis patches (hips -8.9, chest -5.8, right hip -5.1), frames 60-89 -17.0; on frames
+56-66 the right hip's and the hips' patch centres are 3-8 px apart in the render (15-17 px elsewhere), so each
+blob is partly hidden by the other and its centre moves with what is hidden.
 
     python bench/solver_diagnosis.py [--takes sample,hop131_03_f1000_high] [--perfect-tracks] [--skip-focal-grid] [--terms]
 """
