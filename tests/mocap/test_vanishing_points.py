@@ -33,6 +33,15 @@ def tiled_floor(eye, target, focal_px: float, width: int = 640, height: int = 48
     return img
 
 
+def sample_clip() -> VideoClip:
+    """The bundled sample video as a clip (640x480, 30 fps, every frame)."""
+    path = ROOT / "data" / "sample" / "sample.mp4"
+    cap = cv2.VideoCapture(str(path))
+    n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+    cap.release()
+    return VideoClip(path=str(path), sha256="-", stop=n, fps=30.0, width=640, height=480)
+
+
 @pytest.mark.parametrize("focal, eye, roll, bound", [(500.0, (-1.0, 0.9, 5.0), 0.0, 0.8), (800.0, (2.0, 1.5, 6.0), 0.0, 1.1),
                                                 (1200.0, (1.5, 1.0, 4.0), 0.0, 1.3), (1200.0, (1.5, 1.0, 4.0), 5.0, 2.4)])
 def test_focal_from_an_oblique_tiled_floor(focal, eye, roll, bound):
@@ -53,12 +62,7 @@ def test_no_focal_from_a_plain_background_or_a_room_seen_square_on():
 
 def test_the_sample_room_gives_its_focal_length():
     """The bundled sample (true focal 700 px): within 0.45 % (measured +0.30 %, sd 0.8 %)."""
-    path = ROOT / "data" / "sample" / "sample.mp4"
-    cap = cv2.VideoCapture(str(path))
-    n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
-    cap.release()
-    clip = VideoClip(path=str(path), sha256="-", stop=n, fps=30.0, width=640, height=480)
-    found = estimate_focal(median_background(clip, 25), VanishingParams())
+    found = estimate_focal(median_background(sample_clip(), 25), VanishingParams())
     assert abs(found["focal_px"] / 700.0 - 1.0) < 0.0045, found
     assert found["focal_sd_pct"] < 1.2
 
@@ -94,8 +98,7 @@ def test_the_background_frames_go_through_progress_and_an_interrupted_run_stops(
 
     from tbha_graph.core.node import CANCEL, Cancelled
 
-    clip = VideoClip(path=str(ROOT / "data" / "sample" / "sample.mp4"), sha256="-", stop=210, fps=30.0, width=640,
-                     height=480)
+    clip = sample_clip()
     seen = []
 
     def progress(items, total=None, desc=""):
