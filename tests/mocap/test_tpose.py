@@ -7,7 +7,7 @@ import pytest
 
 from tbha_graph.core.errors import NodeFailed
 from tbha_graph.core.runner import load_graph, run_graph
-from tbha_graph.mocap.track.tpose import find_tpose, tpose_frames
+from tbha_graph.mocap.tpose import find_tpose, tpose_frames
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -44,7 +44,7 @@ from ..bundles.colors import as_color_model
 from ..ports import COLORS, DETECTIONS, TRACKS2D
 from ..skeleton import JOINT_INDEX, JOINT_NAMES, N_JOINTS, PARENTS
 from .body import TORSO_MIRRORS, BodyBounds
-from .tpose import find_tpose
+from ..tpose import find_tpose
 from ..bundles.detections import check_detections
 from .common import (DOUBT, StartParams, class_joints, frame_candidates, run_passes, start_frame,
                      tracks_bundle)
@@ -112,7 +112,7 @@ class PostureKalmanParams(StartParams):
     )
     require_tpose: bool = Field(
         False, description="the take must open with a T-pose facing the camera in its first tpose_seconds "
-                          "(tbha_graph.mocap.track.tpose); false: track without one (then give the camera and bones)"
+                          "(tbha_graph.mocap.tpose); false: track without one (then give the camera and bones)"
     )
     tpose_seconds: float = Field(3.0, gt=0, description="where the opening T-pose is looked for", json_schema_extra={"unit": "s"})
 

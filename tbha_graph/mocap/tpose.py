@@ -1,7 +1,8 @@
 """Finding the opening T-pose of a take in its 2D joint tracks.
 
 Everything the pipeline does first -- telling same-coloured patches apart, fitting the camera, measuring
-bones -- assumes the take opens with the actor in a T-pose facing the camera. A take without one must
+bones -- assumes the take opens with the actor in a T-pose facing the camera, and the whole-take solver holds
+the limbs to a T-pose on the frames found here (``sigma_tpose``). A take without one must
 fail clearly rather than give confident-looking figures. :func:`find_tpose` looks for it in the first
 seconds: a run of frames where, in the image (pixels, y down; L = the 2D neck-hips length),
 
@@ -15,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..skeleton import JOINT_INDEX as J
+from .skeleton import JOINT_INDEX as J
 
 NEEDED = ("neck", "hips", "left_shoulder", "right_shoulder", "left_elbow", "right_elbow", "left_wrist", "right_wrist",
           "left_hip", "right_hip", "left_knee", "right_knee", "left_ankle", "right_ankle")
