@@ -4,7 +4,7 @@ above it, twisted torsos, points with zero weight, robust reprojection beyond it
 midpoints outside the actor's silhouette, some beyond the soft-L1 scale, the lower ankle above its support
 band, the torso facing the camera on frames flagged away, the feet above the silhouette's lowest row, the
 torso's fronts against a detector's, some mirrored, some missing, a detector's keypoints where the suit's points
-are lost, some with left and right swapped)."""
+are lost, some with left and right swapped, the limbs against the opening T-pose's on the frames flagged so)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -14,7 +14,7 @@ import numpy as np
 from tbha_graph.mocap.reconstruct.solve_take import contacts_from_image, rest_pair_distances
 from tbha_graph.mocap.reconstruct.take_jacobian import joint_jacobian, residual_jacobian
 from tbha_graph.mocap.reconstruct.take_model import (DEFAULT_POINT_OFFSETS, HINGES, KP_PAIRS, N_COVER, N_FACING, N_FRAME_RES, N_HANG,
-                                                     N_KP, N_SIL,
+                                                     N_KP, N_SIL, N_TPOSE,
                                                      PER_FRAME, TORSO_PAIRS, SilhouetteField, TakeData, TakeProblem, Weights,
                                                      bone_directions, fronts, pack_initial, point_positions, unit)
 from tbha_graph.mocap.segment.silhouette import distance_outside
@@ -28,7 +28,9 @@ KINDS = {"reprojection": slice(0, 32), "torso": slice(32, 32 + len(TORSO_PAIRS))
          "upright": slice(N_FRAME_RES + N_SIL + N_COVER, N_FRAME_RES + N_SIL + N_COVER + 1),
          "hang": slice(N_FRAME_RES + N_SIL + N_COVER + 1, N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG),
          "keypoints": slice(N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG, N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_KP),
-         "facing": slice(N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_KP, N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_KP + N_FACING)}
+         "facing": slice(N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_KP, N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_KP + N_FACING),
+         "tpose": slice(N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_KP + N_FACING,
+                        N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_KP + N_FACING + N_TPOSE)}
 
 
 def thin_silhouettes(uv: np.ndarray, scale: float = 0.5, shape=(240, 320), ghost: float = 0.0, width: int = 1) -> SilhouetteField:
@@ -84,7 +86,7 @@ def test_analytic_frame_jacobian_equals_central_differences():
     kp_weight[2::5, 12] = 0.0  # and none
     data = TakeData(uv, weight, L, centre, fps, 0.08, contact, rest_pair_distances(L, 0.08),
                     silhouette=thin_silhouettes(joints_uv, ghost=60.0), away=np.arange(n) % 2 == 0, up=-nf, facing=facing,
-                    keypoints=kp, kp_weight=kp_weight)
+                    keypoints=kp, kp_weight=kp_weight, tpose=np.arange(n) < 12)
     prob = TakeProblem(data, bone_directions(P), nf, Weights(sigma_twist=0.2, support_band=-0.03, upright_sin=0.15,
                                                           sigma_hang=0.5),
                        DEFAULT_POINT_OFFSETS.copy(), free_offsets=False)
@@ -93,7 +95,7 @@ def test_analytic_frame_jacobian_equals_central_differences():
     fr[:, 3:] += rng.normal(scale=0.35, size=(n, PER_FRAME - 3))  # bones turned ~20 degrees: hinges bent wrongly
     h = 1e-6
     F = prob.n_frame_res
-    assert F == N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_KP + N_FACING
+    assert F == N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_KP + N_FACING + N_TPOSE
     num = np.empty((n, F, PER_FRAME))
     for i in range(PER_FRAME):
         fp, fm = fr.copy(), fr.copy()
@@ -120,6 +122,8 @@ def test_analytic_frame_jacobian_equals_central_differences():
     assert (np.abs(kpr) > prob.w.robust_scale).any()
     fac = prob.frame_terms(Pj, g)[:, KINDS["facing"]]
     assert not fac[3::7, 3:].any() and (np.abs(fac[::5]) > prob.w.robust_scale).any()  # missing hints cost nothing; mirrored ones beyond the scale
+    tp = prob.frame_terms(Pj, g)[:, KINDS["tpose"]]
+    assert (np.abs(tp[:12]).sum(axis=1) > 1.0).all() and not tp[12:].any()  # only on the T-pose's frames (a walk: far from it)
     cover = prob.frame_terms(Pj, g)[:, KINDS["cover"]]
     assert not cover[weight[:, 1] > 0].any()  # only where the torso is not seen
     assert (cover[1::4] > 0).mean() > 0.22 and (cover > prob.w.robust_scale).any()  # measured 0.33, some beyond the soft-L1 scale

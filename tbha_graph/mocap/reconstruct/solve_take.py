@@ -19,7 +19,14 @@ body's depth only weakly, and the hips do not jerk), near-rigid torso, knee/elbo
 contact (planted ankles — found from the image, where a planted ankle stands still — at rest height within
 a 3 cm roll band and not sliding; no ankle below the floor), a weak pose prior (head along the neck) and a
 twist prior (the pelvis faces where the thorax faces, ``sigma_twist`` about 11 degrees: walking twists them
-5-15 degrees apart; without it a pelvis tipped to its mirror depth side costs nothing).
+5-15 degrees apart; without it a pelvis tipped to its mirror depth side costs nothing). On the take's
+opening T-pose (the frames :func:`..tpose.find_tpose` finds in the image, as the tracker does) the limbs are
+held straight, the arms along the shoulder line (``sigma_tpose``, :func:`.take_model.tpose_residual`: an arm held
+out sideways keeps nearly the same image as it swings 20-30 degrees into depth, and bones a few percent off the
+actor's make it swing; measured on the 16 renders of ``bench/solver_sweep.py``, each solved three times: the
+T-pose frames 27.2 -> 16.7 mm, each aligned on its own, the three solver renders and the sample 62.9 -> 59.5 mm
+seq-MPJPE (the sample 51.4 -> 51.3), all 16 100.7 -> 101.7 mm and root-relative 76.1 -> 75.9, within the
+search's scatter).
 
 1. **Starts.** For each starting focal length (``focal_grid`` × image width, a weak log-normal prior
    around ``focal_prior_width`` × width), or the given ``focal_px``: a first skeleton from the seed's
@@ -103,6 +110,7 @@ from ..camera import Camera
 from ..ports import BODY, CAMERA, LENS, MOTION, SIDES, SILHOUETTE, TRACKS2D, report_port
 from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS, TORSO_JOINTS, torso_unseen
 from ..body import DEFAULT_ANKLE_HEIGHT, body_lengths, lengths_to_body, tpose_on_floor
+from ..tpose import find_tpose
 from .take_model import (ANKLES, DEFAULT_POINT_OFFSETS, TORSO_PAIRS, SilhouetteField, TakeData, TakeProblem, Weights,
                          bone_directions, fronts, pack_initial, point_positions, seat_on_outline, unit)
 from .take_solver import levenberg_marquardt
@@ -165,6 +173,10 @@ class SolveTakeParams(BaseModel):
                             "only on frames where no torso patch is seen (on every lost point walk 131_01 went 107 -> 208 mm); 16 renders x 3 "
                             "draws (Pose on every frame, another numpy build): 101.6 mm mean at 4, 102.7 at 2.5, 106.5 at 6, "
                             "119.2 without; as default.yaml runs it: 101.5 at 4, 116.5 without")
+    sigma_tpose: float | None = Field(0.1, gt=0, description="on the take's opening T-pose (the frames the tracker finds it on, "
+                                      "mocap.tpose.find_tpose): each limb bone's direction minus the T-pose's "
+                                      "(arms along the shoulder line and straight, legs straight), unit vectors (0.1: about 6 degrees); "
+                                      "None: off. 16 renders x 3 solves: the T-pose frames 27.2 -> 16.7 mm (each aligned on its own)")
     sigma_facing: float = Field(0.3, gt=0, description="with tracks that carry a detector's torso facing (detect.mediapipe_pose): "
                                 "each front's unit vector minus the detector's, soft-L1 beyond 2 sd (0.3: about 17 degrees); "
                                 "four MediaPipe renders x 3 draws, mean PA-MPJPE: 88.1 mm without, 78.5 / 77.8 / 83.7 at 0.2 / 0.3 / 0.5")
@@ -294,6 +306,12 @@ FLOOR_SD_FLOOR_DEG = 0.5
 #: (:func:`.take_solver.search_turns_lm`)
 TURN_SEARCH = True
 
+#: The arms' level (elbows and wrists within this many 2D neck-hips lengths of shoulder height) of the frames held to
+#: the T-pose (``sigma_tpose``; :func:`..tpose.find_tpose`): stricter than the tracker's 0.3, so that the prior holds
+#: a T-pose held, not the start of leaving it (on the renders the looser run ends on a frame whose arms are already
+#: 11 degrees down; this one 1-2 frames earlier, 6 degrees at most)
+TPOSE_PRIOR_LEVEL = 0.15
+
 #: A start or cross seed whose subsample cost is within this fraction of the best start's, at a clearly
 #: different focal length (over 10 %), makes the focal length "ambiguous" (a warning)
 RIVAL_COST = 0.15
@@ -394,7 +412,8 @@ def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: Solve
                     rest_pair_distances(lengths, p.ankle_height), silhouette=silhouette,
                     away=None if silhouette is None else facing_away(weight), up=nf, **(hints or {}))
     w = Weights(sigma_px=p.sigma_px, sigma_acc=p.sigma_acc, sigma_twist=p.sigma_twist, sigma_acc_torso=p.sigma_acc_torso,
-                sigma_sil=p.sigma_sil, sigma_hang=p.sigma_hang, sigma_facing=p.sigma_facing, sigma_kp=p.sigma_kp)
+                sigma_sil=p.sigma_sil, sigma_hang=p.sigma_hang, sigma_facing=p.sigma_facing, sigma_kp=p.sigma_kp,
+                sigma_tpose=p.sigma_tpose or 1.0)
     offsets = point_offsets_of(p)
     return TakeProblem(data, bone_directions(P), nf, w, offsets, fixed_globals=held_globals, free_offsets=free_offsets,
                        focal_prior=focal_prior, free_lengths=p.free_lengths, floor_prior=floor_prior), d
@@ -553,6 +572,13 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
         if not hints["kp_weight"].any():  # none left: the problem is the one without keypoints
             hints = {k: v for k, v in hints.items() if k not in ("keypoints", "kp_weight")} or None
 
+    if p.sigma_tpose is not None:  # the opening T-pose's frames: a per-frame prior carried like a detector's data
+        found = find_tpose(points, tracked, fps, max_untracked=1, level=TPOSE_PRIOR_LEVEL)  # one patch may be lost
+        if found is not None:
+            tpose = np.zeros(points.shape[0], dtype=bool)
+            tpose[found[0]:found[1] + 1] = True
+            hints = {**(hints or {}), "tpose": tpose}
+
     def hint(rows):  # the detector's data on these frames (None without)
         return hints_on(hints, rows)
 
@@ -565,6 +591,8 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
     report: dict = {"frames": n}
     if hints is not None and "kp_weight" in hints:  # frames placed by a detector's keypoints (no torso patch seen)
         report["keypoint_frames"] = int((hints["kp_weight"] > 0).any(axis=1).sum())
+    if hints is not None and "tpose" in hints:  # frames held to the opening T-pose (sigma_tpose)
+        report["tpose_prior_frames"] = int(np.sum(hints["tpose"]))
     warnings_out: list[str] = []
     # for each starting focal length (or the known one): a first skeleton; on a frame subsample spread over
     # the take, LM, the depth-side search and LM again; then every frame from that solution (interpolated),

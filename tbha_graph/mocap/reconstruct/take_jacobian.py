@@ -18,8 +18,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..skeleton import N_JOINTS, PARENTS
-from .take_model import (ANKLES, AXIS_TRIPLES, HANG_BONES, HINGES, J, N_BONES, N_COVER, N_FACING, N_FRAME_RES, N_KP, N_SIL, PELVIS_JOINTS,
-                         PELVIS_SIDE, PER_FRAME, SIL_PAIRS, THORAX_JOINTS, TORSO_PAIRS, TakeProblem, bottom_residual,
+from .take_model import (ANKLES, AXIS_TRIPLES, HANG_BONES, HINGES, J, N_BONES, N_COVER, N_FACING, N_FRAME_RES, N_KP, N_SIL, N_TPOSE, PELVIS_JOINTS,
+                         PELVIS_SIDE, PER_FRAME, SIL_PAIRS, THORAX_JOINTS, TORSO_PAIRS, TPOSE_PAIRS, TakeProblem, bottom_residual,
                          cover_residuals, cover_segments, hang_residual, keypoint_targets, robust_slope, sil_residuals,
                          torso_unseen, unit,
                          unseen_points, upright_residual)
@@ -191,15 +191,16 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
             parts["bottom"] = np.concatenate([bot["dr_dS"], bot["dlogf"][:, None], bot["A"]], axis=1)
             parts["sil_dlogf"] = sil["dlogf"]
             parts["cover_dlogf"] = cov["dlogf"]
+    tp = N_TPOSE if d.tpose is not None else 0
     if d.keypoints is not None:  # before the facing block: robust((uv - keypoint) w / sigma) per joint and axis
-        row = prob.n_frame_res - N_KP - (N_FACING if d.facing is not None else 0)
+        row = prob.n_frame_res - N_KP - (N_FACING if d.facing is not None else 0) - tp
         kp = _keypoints(prob, P, g, rows)
         for j in range(N_JOINTS):
             out[:, row + 2 * j:row + 2 * j + 2, j] += kp["dP"][:, j]
         if parts is not None:
             parts["kp_dlogf"] = kp["dlogf"]
-    if d.facing is not None:  # the last block: robust((front - hint) / sigma) per coordinate, thorax then pelvis
-        row = prob.n_frame_res - N_FACING
+    if d.facing is not None:  # robust((front - hint) / sigma) per coordinate, thorax then pelvis
+        row = prob.n_frame_res - N_FACING - tp
         hint = np.asarray(d.facing, dtype=np.float64)[rows]
         on = (np.linalg.norm(hint, axis=-1) > 0.5)  # (n, 2)
         for k, (fr, dfr, fj) in enumerate(((thorax, d_thorax, THORAX_JOINTS), (pelvis, d_pelvis, PELVIS_JOINTS))):
@@ -207,6 +208,19 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
             slope = robust_slope(e, w.robust_scale) * on[:, k, None] / w.sigma_facing  # (n, 3)
             for jj, Dj in zip(fj, dfr):
                 out[:, row + 3 * k:row + 3 * k + 3, jj] += slope[..., None] * Dj
+    if d.tpose is not None:  # the last block: d (unit(P_b - P_a) - unit(P_e - P_c)) = U1 (dP_b - dP_a) - U2 (dP_e - dP_c)
+        row = prob.n_frame_res - N_TPOSE
+        on = np.asarray(d.tpose, dtype=np.float64)[rows] / w.sigma_tpose
+        if on.any():
+            a, b, c, e = (TPOSE_PAIRS[:, i] for i in range(4))
+            U1 = unit_jacobian(P[:, b] - P[:, a])[1] * on[:, None, None, None]  # (n, pairs, 3, 3)
+            U2 = unit_jacobian(P[:, e] - P[:, c])[1] * on[:, None, None, None]
+            for k in range(len(TPOSE_PAIRS)):
+                rk = slice(row + 3 * k, row + 3 * k + 3)
+                out[:, rk, b[k]] += U1[:, k]
+                out[:, rk, a[k]] -= U1[:, k]
+                out[:, rk, e[k]] -= U2[:, k]
+                out[:, rk, c[k]] += U2[:, k]
     return out
 
 

@@ -166,6 +166,9 @@ class TakeData:
     #: detector's confidence (0 = none)
     keypoints: np.ndarray | None = None
     kp_weight: np.ndarray | None = None
+    #: ``(n,)`` bool or None: the take's opening T-pose as the image shows it (:func:`..tpose.find_tpose`),
+    #: where the limbs are held straight and the arms out (:func:`tpose_residual`)
+    tpose: np.ndarray | None = None
 
     def subset(self, rows, breaks: np.ndarray | None = None) -> "TakeData":
         """The data of the frames ``rows`` (slice or index array), with ``breaks`` for them."""
@@ -175,7 +178,8 @@ class TakeData:
                         away=None if self.away is None else np.asarray(self.away)[rows], up=self.up,
                         facing=None if self.facing is None else np.asarray(self.facing)[rows],
                         keypoints=None if self.keypoints is None else np.asarray(self.keypoints)[rows],
-                        kp_weight=None if self.kp_weight is None else np.asarray(self.kp_weight)[rows])
+                        kp_weight=None if self.kp_weight is None else np.asarray(self.kp_weight)[rows],
+                        tpose=None if self.tpose is None else np.asarray(self.tpose)[rows])
 
     def acc_mask(self) -> np.ndarray:
         """``(n - 2,)`` 1.0 where the acceleration term of frames (t, t+1, t+2) lies inside one segment."""
@@ -220,6 +224,8 @@ class Weights:
     #                              down, over this (unit vectors), costs its square: the limbs' patches are unseen there and the
     #                              outline alone let them flail (None: off)
     sigma_kp: float = 4.0        # a detector's keypoint where the suit's point is lost, pixels (soft-L1 beyond robust_scale)
+    sigma_tpose: float = 0.1     # on the opening T-pose's frames (TakeData.tpose): each limb bone's direction minus the T-pose's
+    #                              (upper arms along the shoulder line, forearms and shins straight), unit vectors
     sigma_facing: float = 0.5    # with a facing hint (TakeData.facing): each front's unit vector minus the hint's, soft-L1 beyond robust_scale
     sigma_cover: float = 4.0     # with a silhouette: a sample of the outline farther from every projected bone than
     cover_tolerance: float = 0.06  # this fraction of the outline's height (about 0.1 m: the body's half thickness)
@@ -485,6 +491,31 @@ def facing_residual(thorax: np.ndarray, pelvis: np.ndarray, d: TakeData, w: "Wei
     return robust(r / w.sigma_facing, w.robust_scale)
 
 
+#: The opening T-pose's limbs as joint quadruples ``(a, b, c, d)``: bone a -> b points as c -> d does (the upper
+#: arms along the shoulder line, outwards; the forearms on from the upper arms; the shins on from the thighs).
+#: The thighs are left free: held along the spine they lean with it, and the image fixes the spine's lean into
+#: depth weakly, so the planted feet moved and the floor with them (on the sample's exact patch centres the camera
+#: came out 8.8 cm too high instead of 2.8)
+TPOSE_PAIRS = np.array([[J[a], J[b], J[c], J[d]] for a, b, c, d in (
+    ("left_shoulder", "left_elbow", "right_shoulder", "left_shoulder"), ("left_elbow", "left_wrist", "left_shoulder", "left_elbow"),
+    ("right_shoulder", "right_elbow", "left_shoulder", "right_shoulder"), ("right_elbow", "right_wrist", "right_shoulder", "right_elbow"),
+    ("left_knee", "left_ankle", "left_hip", "left_knee"), ("right_knee", "right_ankle", "right_hip", "right_knee"))])
+#: T-pose residuals per frame: x, y, z of each of :data:`TPOSE_PAIRS`
+N_TPOSE = 3 * len(TPOSE_PAIRS)
+
+
+def tpose_residual(P: np.ndarray, d: TakeData, w: "Weights") -> np.ndarray:
+    """The limbs in the opening T-pose ``(..., n, N_TPOSE)``: ``(unit(P_b - P_a) - unit(P_d - P_c)) / sigma_tpose``
+    for each of :data:`TPOSE_PAIRS` on the frames ``d.tpose`` (0 elsewhere); joints ``P`` ``(..., n, 16, 3)``.
+    The image of an arm held out sideways barely changes as it swings 20-30 degrees into depth (131_01's left arm
+    was solved 30 degrees towards the camera, the truth's 11 degrees away), and the depth side chosen there is
+    carried on after the T-pose; the take is required to open with a T-pose, so there the pose is known."""
+    on = np.asarray(d.tpose, dtype=np.float64) / w.sigma_tpose
+    a, b, c, e = (TPOSE_PAIRS[:, i] for i in range(4))
+    r = unit(P[..., b, :] - P[..., a, :]) - unit(P[..., e, :] - P[..., c, :])
+    return (r * on[:, None, None]).reshape(P.shape[:-2] + (N_TPOSE,))
+
+
 #: Left/right joint pairs whose detector keypoints may come swapped (:func:`keypoint_residual` takes the cheaper)
 KP_PAIRS = np.array([(J["left_" + n], J["right_" + n]) for n in ("shoulder", "elbow", "wrist", "hip", "knee", "ankle")])
 #: Keypoint residuals per frame: u, v of every joint
@@ -575,10 +606,11 @@ class Layout:
 #: Residuals per frame that depend on that frame alone: reprojection (16 x 2), torso distances, hinges,
 #: ankle below the floor (2), planted ankle off the floor (2), pose prior (head along the neck, 3; pelvis
 #: facing where the thorax faces, 3); with a silhouette, :data:`N_SIL` + :data:`N_COVER` + 1 + :data:`N_HANG` more,
-#: with a facing hint :data:`N_FACING` more (:attr:`TakeProblem.n_frame_res`).
+#: with a facing hint :data:`N_FACING` more, on a take with an opening T-pose :data:`N_TPOSE` more
+#: (:attr:`TakeProblem.n_frame_res`).
 N_FRAME_RES = N_JOINTS * 2 + len(TORSO_PAIRS) + len(HINGES) + 4 + 6
-#: With a facing hint (:attr:`TakeData.facing`), the last residuals of a frame: the thorax's and the pelvis's
-#: fronts against the hint's (:func:`facing_residual`)
+#: With a facing hint (:attr:`TakeData.facing`), the residuals of a frame before the T-pose's: the thorax's and the
+#: pelvis's fronts against the hint's (:func:`facing_residual`)
 N_FACING = 6
 
 
@@ -591,8 +623,8 @@ class TakeProblem:
 
     Residual vector: per-frame block ``(n, n_frame_res)`` (frame-major; :data:`N_FRAME_RES`, plus the silhouette's
     :data:`N_SIL`, the cover's :data:`N_COVER`, the upright spine's 1 and the hanging limbs' :data:`N_HANG` at its
-    end when the data has a silhouette, then a detector's keypoints :data:`N_KP` and torso facing :data:`N_FACING`
-    when the data has them), then accelerations
+    end when the data has a silhouette, then a detector's keypoints :data:`N_KP`, torso facing :data:`N_FACING` and
+    the opening T-pose's limbs :data:`N_TPOSE` when the data has them), then accelerations
     ``(n - 2, 16 * 3)``, planted-ankle slides ``(n, 2)``, then global priors (point offsets, a known focal).
     """
 
@@ -610,7 +642,8 @@ class TakeProblem:
         self.floor_prior = None if floor_prior is None else (unit(np.asarray(floor_prior[0], dtype=np.float64)), float(floor_prior[1]))
         self.n_glob = 0 if fixed_globals is not None else self.layout.n_globals
         self.n_frame_res = (N_FRAME_RES + (N_SIL + N_COVER + 1 + N_HANG if data.silhouette is not None else 0)
-                            + (N_KP if data.keypoints is not None else 0) + (N_FACING if data.facing is not None else 0))
+                            + (N_KP if data.keypoints is not None else 0) + (N_FACING if data.facing is not None else 0)
+                            + (N_TPOSE if data.tpose is not None else 0))
         self.set_refs(ref, n_ref)
 
     def set_refs(self, ref: np.ndarray, n_ref: np.ndarray) -> None:
@@ -696,8 +729,10 @@ class TakeProblem:
                       upright_residual(P, d, w)[0][:, None], hang_residual(P, d, w)[0]]
         if d.keypoints is not None:  # a detector's keypoints where the suit's points are lost
             terms.append(keypoint_residual(P, f, d, w))
-        if d.facing is not None:  # the last block: the fronts against the detector's
+        if d.facing is not None:  # the fronts against the detector's
             terms.append(facing_residual(thorax, pelvis, d, w))
+        if d.tpose is not None:  # the last block: the opening T-pose's limbs
+            terms.append(tpose_residual(P, d, w))
         return np.concatenate(terms, axis=-1)
 
     def slide_vectors(self, P: np.ndarray, nf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -755,13 +790,14 @@ class TakeProblem:
         acc, slide = self.coupled_terms(P, self.floor(g)[0])
         fac = N_FACING if self.d.facing is not None else 0
         kp = N_KP if self.d.keypoints is not None else 0
-        sil = self.n_frame_res - N_FRAME_RES - fac - kp
+        tp = N_TPOSE if self.d.tpose is not None else 0
+        sil = self.n_frame_res - N_FRAME_RES - fac - kp - tp
         extra = [N_COVER, 1, N_HANG] if sil else [0, 0, 0]  # the cover, upright and hang terms end the silhouette's block
-        k = np.cumsum([0, N_JOINTS * 2, len(TORSO_PAIRS), len(HINGES), 2, 2, 6, sil - sum(extra)] + extra + [kp, fac])
+        k = np.cumsum([0, N_JOINTS * 2, len(TORSO_PAIRS), len(HINGES), 2, 2, 6, sil - sum(extra)] + extra + [kp, fac, tp])
         names = ("reprojection", "torso", "hinge", "below_floor", "contact", "pose", "silhouette", "cover", "upright", "hang",
-                 "keypoints", "facing")
+                 "keypoints", "facing", "tpose")
         out = {nm: 0.5 * float(np.sum(F[:, k[i]:k[i + 1]] ** 2)) for i, nm in enumerate(names)
-               if nm not in ("keypoints", "facing") or k[i + 1] > k[i]}  # a detector's terms only with its data
+               if nm not in ("keypoints", "facing", "tpose") or k[i + 1] > k[i]}  # optional terms only with their data
         out.update(acceleration=0.5 * float(np.sum(acc ** 2)), slide=0.5 * float(np.sum(slide ** 2)),
                    priors=0.5 * float(np.sum(self.global_terms(g) ** 2)))
         return out
