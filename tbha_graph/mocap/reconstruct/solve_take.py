@@ -23,10 +23,12 @@ twist prior (the pelvis faces where the thorax faces, ``sigma_twist`` about 11 d
 opening T-pose (the frames :func:`..tpose.find_tpose` finds in the image, as the tracker does) the limbs are
 held straight, the arms along the shoulder line (``sigma_tpose``, :func:`.take_model.tpose_residual`: an arm held
 out sideways keeps nearly the same image as it swings 20-30 degrees into depth, and bones a few percent off the
-actor's make it swing; measured on the 16 renders of ``bench/solver_sweep.py``, each solved three times: the
-T-pose frames 27.2 -> 16.7 mm, each aligned on its own, the three solver renders and the sample 62.9 -> 59.5 mm
-seq-MPJPE (the sample 51.4 -> 51.3), all 16 100.7 -> 101.7 mm and root-relative 76.1 -> 75.9, within the
-search's scatter).
+actor's make it swing), in the pose solves at the chosen focal length only, as the silhouette: in the focal
+choice, with bones a few percent off, the arms held out moved the focal length instead (held_131_01_full_turn's
+700.8 -> 715.9 px, truth 700, and that take 142 -> 203 mm). Measured on the 16 renders of ``bench/solver_sweep.py``,
+each solved three times: the T-pose frames 27.2 -> 18.2 mm, each aligned on its own; seq-MPJPE 100.7 -> 100.0 mm,
+the three solver renders and the sample 62.9 -> 60.8, the six held-out takes 119.0 -> 118.5; root-relative
+76.1 -> 75.5: within the search's scatter, the T-pose excepted.
 
 1. **Starts.** For each starting focal length (``focal_grid`` × image width, a weak log-normal prior
    around ``focal_prior_width`` × width), or the given ``focal_px``: a first skeleton from the seed's
@@ -176,7 +178,8 @@ class SolveTakeParams(BaseModel):
     sigma_tpose: float | None = Field(0.1, gt=0, description="on the take's opening T-pose (the frames the tracker finds it on, "
                                       "mocap.tpose.find_tpose): each limb bone's direction minus the T-pose's "
                                       "(arms along the shoulder line and straight, legs straight), unit vectors (0.1: about 6 degrees); "
-                                      "None: off. 16 renders x 3 solves: the T-pose frames 27.2 -> 16.7 mm (each aligned on its own)")
+                                      "None: off. Not used in choosing the focal length. 16 renders x 3 solves: the T-pose frames 27.2 -> 18.2 mm "
+                                      "(each aligned on its own), the whole takes within the search's scatter")
     sigma_facing: float = Field(0.3, gt=0, description="with tracks that carry a detector's torso facing (detect.mediapipe_pose): "
                                 "each front's unit vector minus the detector's, soft-L1 beyond 2 sd (0.3: about 17 degrees); "
                                 "four MediaPipe renders x 3 draws, mean PA-MPJPE: 88.1 mm without, 78.5 / 77.8 / 83.7 at 0.2 / 0.3 / 0.5")
@@ -579,8 +582,10 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
             tpose[found[0]:found[1] + 1] = True
             hints = {**(hints or {}), "tpose": tpose}
 
-    def hint(rows):  # the detector's data on these frames (None without)
-        return hints_on(hints, rows)
+    def hint(rows, tpose: bool = True):  # the detector's data on these frames (None without); without the T-pose's
+        # frames where the focal length is chosen (held out sideways, arms of the wrong length move the focal instead)
+        h = hints if tpose or hints is None else ({k: v for k, v in hints.items() if k != "tpose"} or None)
+        return hints_on(h, rows)
 
     floor_prior = None
     n = points.shape[0]
@@ -633,7 +638,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
         g0 = globals_vector(f0, float(-cam.R[:, 1] @ cam.t), False, p.free_lengths)
         prob_k, x_k, cost_k, _, kept = solve_frames(points[sub], weight[sub], lengths, centre, fps / step, P0[sub], cam,
                                                     g0, q, p.calib_iterations, False, focal_prior, p.side_search,
-                                                    contact[sub], floor_prior=floor_prior, hints=hint(sub))
+                                                    contact[sub], floor_prior=floor_prior, hints=hint(sub, False))
         f_end = float(np.exp(prob_k.globals_of(x_k)[0]))
         sweep.append([round(f0, 1), round(f_end, 1), round(cost_k, 1)])
         if best is None or cost_k < best[0]:
@@ -658,7 +663,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
             prob_k, x_k, cost_k, _, _ = solve_frames(points[sub], weight[sub], lengths, centre, fps / step, P_k,
                                                      (nf_b, d_k), gs, q, p.calib_iterations, False,
                                                      focal_prior, False, contact[sub], floor_prior=floor_prior,
-                                                     hints=hint(sub))
+                                                     hints=hint(sub, False))
             cross.append([round(f_end, 1), round(float(np.exp(prob_k.globals_of(x_k)[0])), 1), round(cost_k, 1)])
         report["focal_cross_seeded"] = cross
         sweep = sweep + cross
@@ -673,7 +678,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
     gs = np.concatenate([g_sub[:1], [0.0, 0.0, d0], g_sub[4:]])
     prob, x, cost, ne, _ = solve_frames(points[cam_rows], weight[cam_rows], lengths, centre, fps / k_cam, P1[cam_rows],
                                         (nf0, d0), gs, q, p.max_iterations, False, focal_prior, False, contact[cam_rows],
-                                        floor_prior=floor_prior, hints=hint(cam_rows))
+                                        floor_prior=floor_prior, hints=hint(cam_rows, False))
     kept2 = 0
     # uncertainty of the focal length (log f) from the normal equations, scaled by the fit's residual level
     dof = max(prob.residuals(x).size - x.size, 1)
