@@ -416,7 +416,7 @@ def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: Solve
                     away=None if silhouette is None else facing_away(weight), up=nf, **(hints or {}))
     w = Weights(sigma_px=p.sigma_px, sigma_acc=p.sigma_acc, sigma_twist=p.sigma_twist, sigma_acc_torso=p.sigma_acc_torso,
                 sigma_sil=p.sigma_sil, sigma_hang=p.sigma_hang, sigma_facing=p.sigma_facing, sigma_kp=p.sigma_kp,
-                sigma_tpose=p.sigma_tpose or 1.0)
+                sigma_tpose=Weights.sigma_tpose if p.sigma_tpose is None else p.sigma_tpose)  # None: no T-pose data
     offsets = point_offsets_of(p)
     return TakeProblem(data, bone_directions(P), nf, w, offsets, fixed_globals=held_globals, free_offsets=free_offsets,
                        focal_prior=focal_prior, free_lengths=p.free_lengths, floor_prior=floor_prior), d

@@ -191,7 +191,7 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
             parts["bottom"] = np.concatenate([bot["dr_dS"], bot["dlogf"][:, None], bot["A"]], axis=1)
             parts["sil_dlogf"] = sil["dlogf"]
             parts["cover_dlogf"] = cov["dlogf"]
-    tp = N_TPOSE if d.tpose is not None else 0
+    tp = N_TPOSE if d.holds_tpose else 0
     if d.keypoints is not None:  # before the facing block: robust((uv - keypoint) w / sigma) per joint and axis
         row = prob.n_frame_res - N_KP - (N_FACING if d.facing is not None else 0) - tp
         kp = _keypoints(prob, P, g, rows)
@@ -208,7 +208,7 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
             slope = robust_slope(e, w.robust_scale) * on[:, k, None] / w.sigma_facing  # (n, 3)
             for jj, Dj in zip(fj, dfr):
                 out[:, row + 3 * k:row + 3 * k + 3, jj] += slope[..., None] * Dj
-    if d.tpose is not None:  # the last block: d (unit(P_b - P_a) - unit(P_e - P_c)) = U1 (dP_b - dP_a) - U2 (dP_e - dP_c)
+    if d.holds_tpose:  # the last block: d (unit(P_b - P_a) - unit(P_e - P_c)) = U1 (dP_b - dP_a) - U2 (dP_e - dP_c)
         row = prob.n_frame_res - N_TPOSE
         on = np.asarray(d.tpose, dtype=np.float64)[rows] / w.sigma_tpose
         if on.any():

@@ -181,6 +181,12 @@ class TakeData:
                         kp_weight=None if self.kp_weight is None else np.asarray(self.kp_weight)[rows],
                         tpose=None if self.tpose is None else np.asarray(self.tpose)[rows])
 
+    @property
+    def holds_tpose(self) -> bool:
+        """Whether any of these frames is held to the opening T-pose: only then has a frame the T-pose's rows (a
+        window or search candidate after the T-pose carries none, rather than rows that are zero everywhere)."""
+        return self.tpose is not None and bool(np.any(self.tpose))
+
     def acc_mask(self) -> np.ndarray:
         """``(n - 2,)`` 1.0 where the acceleration term of frames (t, t+1, t+2) lies inside one segment."""
         n = self.points.shape[0]
@@ -643,7 +649,7 @@ class TakeProblem:
         self.n_glob = 0 if fixed_globals is not None else self.layout.n_globals
         self.n_frame_res = (N_FRAME_RES + (N_SIL + N_COVER + 1 + N_HANG if data.silhouette is not None else 0)
                             + (N_KP if data.keypoints is not None else 0) + (N_FACING if data.facing is not None else 0)
-                            + (N_TPOSE if data.tpose is not None else 0))
+                            + (N_TPOSE if data.holds_tpose else 0))
         self.set_refs(ref, n_ref)
 
     def set_refs(self, ref: np.ndarray, n_ref: np.ndarray) -> None:
@@ -731,7 +737,7 @@ class TakeProblem:
             terms.append(keypoint_residual(P, f, d, w))
         if d.facing is not None:  # the fronts against the detector's
             terms.append(facing_residual(thorax, pelvis, d, w))
-        if d.tpose is not None:  # the last block: the opening T-pose's limbs
+        if d.holds_tpose:  # the last block: the opening T-pose's limbs
             terms.append(tpose_residual(P, d, w))
         return np.concatenate(terms, axis=-1)
 
@@ -790,7 +796,7 @@ class TakeProblem:
         acc, slide = self.coupled_terms(P, self.floor(g)[0])
         fac = N_FACING if self.d.facing is not None else 0
         kp = N_KP if self.d.keypoints is not None else 0
-        tp = N_TPOSE if self.d.tpose is not None else 0
+        tp = N_TPOSE if self.d.holds_tpose else 0
         sil = self.n_frame_res - N_FRAME_RES - fac - kp - tp
         extra = [N_COVER, 1, N_HANG] if sil else [0, 0, 0]  # the cover, upright and hang terms end the silhouette's block
         k = np.cumsum([0, N_JOINTS * 2, len(TORSO_PAIRS), len(HINGES), 2, 2, 6, sil - sum(extra)] + extra + [kp, fac, tp])
