@@ -8,7 +8,11 @@ default pipeline's nodes (cached in the user cache: the first run renders and tr
 later runs only solve, about 2 minutes per setting); the solve is ``solve_take_arrays`` as the node runs it.
 
 Prints ``name=value`` lines: ``<take>_mpjpe_mm`` (one rigid alignment over the whole take, no scale), then
-``solver4_mean_mm`` (the sample and the three solver renders), ``turning12_mean_mm`` and ``all16_mean_mm``.
+``solver4_mean_mm`` (the sample and the three solver renders), ``turning12_mean_mm``, ``held6_mean_mm`` (the six
+held-out turning takes) and ``all16_mean_mm``; then three more views of the same solves, each as a mean over the
+sixteen takes: ``all16_rootrel_mean_mm`` (the joints relative to the hips after the same alignment: the pose
+without the trajectory), ``all16_tpose_mean_mm`` (the opening T-pose's frames, as the solver finds them, aligned on
+their own: where the bone lengths and the arms' depth show) and ``all16_ms_per_frame`` (the solve's wall time).
 
 Even the mean over sixteen takes moves by ~15 mm with a change that should do nothing (``sigma_px`` 2.0 -> 1.98 or
 2.02: all16 112.7 -> 127.6 / 126.4 mm on 2026-11-26). ``--repeats K`` solves every take K times, the first on its
@@ -29,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +52,7 @@ from tbha_graph.mocap.body import body_lengths  # noqa: E402
 from tbha_graph.mocap.bundles.tracks import read_tracks  # noqa: E402
 from tbha_graph.mocap.evaluate.measures import align_clip  # noqa: E402
 from tbha_graph.mocap.reconstruct import solve_take as st  # noqa: E402
+from tbha_graph.mocap.tpose import find_tpose  # noqa: E402
 
 TURNING = [(take, suit) for take in list(labelling.TAKES) + list(labelling.HELD_OUT) for suit in labelling.SUITS]
 
@@ -66,8 +72,10 @@ def take_graph(take, keypoints: bool = True, node_sets: dict | None = None):
 
 
 def solve(take, params: dict, focal: str, cache: Cache, repeats: int = 1, jitter_px: float = 0.05,
-          keypoints: bool = True, node_sets: dict | None = None) -> list[float]:
-    """Seq-MPJPE (mm) of the solver on ``take`` with ``SolveTakeParams(**params)``, one per repeat (the first on
+          keypoints: bool = True, node_sets: dict | None = None) -> list[dict]:
+    """Scores of the solver on ``take`` with ``SolveTakeParams(**params)``, one dict per repeat: ``seq`` (seq-MPJPE,
+    mm), ``rootrel`` (root-relative after the same alignment, mm), ``tpose`` (the T-pose frames aligned on their
+    own, mm; NaN when the solver finds none) and ``ms`` (the solve's wall time per frame). The first repeat is on
     the tracks as they are, repeat r >= 1 on the tracked points plus Gaussian noise of ``jitter_px`` pixels, seed
     r); ``focal``: ``room`` (the ``lens`` node's estimate, as the default pipeline), ``given`` (the truth's) or
     ``take`` (no lens); ``keypoints``: with MediaPipe's keypoints where no torso patch is seen, as the default pipeline."""
@@ -89,10 +97,20 @@ def solve(take, params: dict, focal: str, cache: Cache, repeats: int = 1, jitter
         points = tr.points
         if r > 0:
             points = points + np.random.default_rng(r).normal(0.0, jitter_px, points.shape)
+        t0 = time.perf_counter()
         res = st.solve_take_arrays(points, tr.tracked, body_lengths(None), tr.width, tr.height, float(tr.fps),
                                    st.SolveTakeParams(**p), silhouette=sil, lens=lens, hints=hints)
+        ms = 1000.0 * (time.perf_counter() - t0) / n
         aligned, _ = align_clip(res["joints"], gt, mode="rigid")
-        out.append(float(np.linalg.norm(aligned - gt, axis=-1).mean() * 1000.0))
+        err = np.linalg.norm(aligned - gt, axis=-1)
+        rel = np.linalg.norm((aligned - aligned[:, :1]) - (gt - gt[:, :1]), axis=-1)
+        found = find_tpose(points, tr.tracked, float(tr.fps), max_untracked=1, level=st.TPOSE_PRIOR_LEVEL)
+        tpose = float("nan")
+        if found is not None:
+            rows = slice(found[0], found[1] + 1)
+            held, _ = align_clip(res["joints"][rows], gt[rows], mode="rigid")
+            tpose = float(np.linalg.norm(held - gt[rows], axis=-1).mean() * 1000.0)
+        out.append({"seq": float(err.mean() * 1000.0), "rootrel": float(rel.mean() * 1000.0), "tpose": tpose, "ms": ms})
     return out
 
 
@@ -127,19 +145,26 @@ def main(argv: list[str] | None = None) -> None:
             ap.error(f"--node-set {item!r}: expected NODE.PARAM=VALUE")
         node_sets[key] = yaml.safe_load(value)
     cache = Cache(Path.home() / ".cache" / "tbha-graph")
-    mm = {}
+    scores: dict[str, list[dict]] = {}
     for take in ["sample"] + [t[0] for t in SOLVER_TAKES] + TURNING:
         name = take if isinstance(take, str) else f"{take[0]}_{take[1]}"
-        mm[name] = solve(take, params, args.focal, cache, args.repeats, args.jitter_px, args.keypoints, node_sets)
-        print(f"{name}_mpjpe_mm={np.mean(mm[name]):.1f}", flush=True)
+        scores[name] = solve(take, params, args.focal, cache, args.repeats, args.jitter_px, args.keypoints, node_sets)
+        seq = [s["seq"] for s in scores[name]]
+        print(f"{name}_mpjpe_mm={np.mean(seq):.1f}", flush=True)
         if args.repeats > 1:
-            print(f"{name}_mpjpe_mm_min={min(mm[name]):.1f}\n{name}_mpjpe_mm_max={max(mm[name]):.1f}", flush=True)
-    v = np.array(list(mm.values()))  # (takes, repeats)
-    for label, rows in (("solver4", v[:4]), ("turning12", v[4:]), ("all16", v)):
+            print(f"{name}_mpjpe_mm_min={min(seq):.1f}\n{name}_mpjpe_mm_max={max(seq):.1f}", flush=True)
+    names = list(scores)
+    v = np.array([[s["seq"] for s in scores[k]] for k in names])  # (takes, repeats)
+    held = [i for i, k in enumerate(names) if k.startswith("held_")]
+    for label, rows in (("solver4", v[:4]), ("turning12", v[4:]), ("held6", v[held]), ("all16", v)):
         per_repeat = rows.mean(axis=0)
         print(f"{label}_mean_mm={per_repeat.mean():.1f}")
         if args.repeats > 1:
             print(f"{label}_mean_mm_min={per_repeat.min():.1f}\n{label}_mean_mm_max={per_repeat.max():.1f}")
+    for key, unit in (("rootrel", "mm"), ("tpose", "mm"), ("ms", "ms_per_frame")):
+        a = np.array([[s[key] for s in scores[k]] for k in names])
+        label = f"all16_{key}_mean_mm" if unit == "mm" else "all16_ms_per_frame"
+        print(f"{label}={np.nanmean(a):.1f}")
 
 
 if __name__ == "__main__":
