@@ -326,7 +326,7 @@ def _silhouette(prob: TakeProblem, P: np.ndarray, g: np.ndarray, rows: slice) ->
 
 
 def _reprojection(prob: TakeProblem, P, g, thorax, d_thorax, pelvis, d_pelvis, out: np.ndarray, rows: slice) -> dict:
-    """Add ``d rep / dP`` (rows ``0..31``: point j's u, v) to ``out`` ``(n, F, 16, 3)``; returns what the globals'
+    """Write ``d rep / dP`` (rows ``0..31``: point j's u, v) into ``out`` ``(n, F, 16, 3)`` (zero there on entry); returns what the globals'
     derivatives reuse: ``Gq`` (d rep / d point, ``(n, 16, 2, 3)``), the points' ``axis`` and ``out`` directions
     ``(n, 16, 3)`` and ``dlogf`` (d rep / d log f, ``(n, 16, 2)``)."""
     w, d = prob.w, prob.d
@@ -359,8 +359,9 @@ def _reprojection(prob: TakeProblem, P, g, thorax, d_thorax, pelvis, d_pelvis, o
     drho = robust_slope(e, w.robust_scale)
     Gq = (drho * s[..., None])[..., None] * _pinhole(Q, f)  # (n, 16, 2, 3)
     flat = out.reshape(n, -1)  # point p's rows (2 p + uv) by joint j's coordinate c: column (2 p + uv) 48 + 3 j + c
-    # the point's own joint (m == j), the limb axis' other ends: distinct (point, joint) pairs, one scatter
-    flat[:, _REP_AXIS] += np.concatenate([Gq @ (np.broadcast_to(_EYE, (n, N_JOINTS, 3, 3)) + d_axis @ (-U2 + U1)),
+    # the point's own joint (m == j), the limb axis' other ends: distinct (point, joint) pairs, one scatter (the
+    # first write into ``out``'s zeros: assigned, no read-add-write)
+    flat[:, _REP_AXIS] = np.concatenate([Gq @ (np.broadcast_to(_EYE, (n, N_JOINTS, 3, 3)) + d_axis @ (-U2 + U1)),
                                           (Gq @ (d_axis @ -U1))[:, _LIVE_A], (Gq @ (d_axis @ U2))[:, _LIVE_B]], axis=1)
     # the front's four joints: point j's rows += Gq_j o_out_j O_j proj_j D_k (D_k of its front), the first three
     # factors once for all four joints; each point's rows go to its own front's joints (added after the axis' terms)
