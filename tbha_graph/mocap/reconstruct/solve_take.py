@@ -40,7 +40,8 @@ the three solver renders and the sample 62.9 -> 60.8, the six held-out takes 119
 3. **Depth sides.** A limb can lie in front of or behind its parent with the same image. For each group of
    bones (pelvis, thorax, each limb bone, head) and each run of frames where the bone points out of the
    image plane, the mirrored run and the current one are re-optimised together (all windows of a group in
-   one problem) and the mirror kept where it ends cheaper (:func:`.take_solver.search_sides_lm`).
+   one problem) and the mirror kept where it ends cheaper (:func:`.take_solver.search_sides_lm`); at the full
+   frame rate ``side_search_passes`` > 1 goes over the groups again where kept mirrors changed the body.
 4. **Focal length.** The start with the lowest cost on the subsample wins. Its depth sides are then re-solved
    at the other starts' focal lengths, on the subsample too (``cross_seed``: each frame's body moved in depth
    so its image stays, :func:`moved_in_depth`), only to test whether the take determines the focal length:
@@ -155,6 +156,13 @@ class SolveTakeParams(BaseModel):
                                     "confidence to this power (0: off; detector keypoints carry one, e.g. MediaPipe's visibility)")
     free_lengths: bool = Field(False, description="refine the bone lengths from the take around the body's (3 % prior); measured on the sample: no better, so off")
     side_search: bool = Field(True, description="re-decide limbs' depth sides over time segments by total cost")
+    side_search_passes: int = Field(1, ge=1, le=5, description="passes of the depth-side search over the groups of bones at "
+                                    "the full frame rate; a pass after the first re-decides a group only where mirrors "
+                                    "kept since changed the body. Measured (round 15): exact 2D of the sample's walk, "
+                                    "focal given, 1 / 2 passes 40.7 / 35.4 mm (200 frames), 26.9 / 19.0 (90); 16 renders "
+                                    "x 3 solves (bench/solver_sweep.py --repeats 3) 100.0 / 97.9 mm (ranges 97.2-101.7 / "
+                                    "97.1-98.9: within the scatter), the sample 50.9 / 53.2, turning takes 113.1 / 109.9; "
+                                    "the solve 55 % slower. So 1")
     sigma_hang: float | None = Field(1.0, gt=0, description="with a silhouette, on frames where only the head is tracked "
                                      "(the actor's back to the camera): each limb bone kept near straight down with this sd "
                                      "(unit vectors; None: off). No limb patch is seen there and the outline alone let the "
@@ -425,7 +433,8 @@ def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: Solve
 
 def solve_frames(points, weight, lengths, centre, fps, P0, floor, g_start, p, iterations, free_offsets, focal_prior,
                  side_search: bool, contact: np.ndarray | None = None, hold_globals: bool = False, tol: float = 1e-5,
-                 silhouette: SilhouetteField | None = None, floor_prior=None, hints: dict | None = None):
+                 silhouette: SilhouetteField | None = None, floor_prior=None, hints: dict | None = None,
+                 side_passes: int = 1):
     """Whole-take solve from joints ``P0``: LM, then (optionally) the depth-side search and LM again; the globals
     ``g_start`` held when ``hold_globals`` (a window of a long take: camera and floor known); the actor's
     ``silhouette`` and a detector's ``hints`` on these frames, if any. Returns ``(problem, x, cost, normal
@@ -442,7 +451,7 @@ def solve_frames(points, weight, lengths, centre, fps, P0, floor, g_start, p, it
     if side_search:
         g = prob.globals_of(x).copy()
         P = prob.solution(x)[4]
-        P, kept = search_sides(prob, P, g)
+        P, kept = search_sides(prob, P, g, passes=side_passes)
         if silhouette is not None and TURN_SEARCH:  # the final pose solve: the turn where the torso is unseen
             P, turns = search_turns_lm(prob, P, g, torso_unseen(weight))
             kept += turns
@@ -490,7 +499,7 @@ def solve_windows(points, weight, lengths, centre, fps, P0, floor, g, p: SolveTa
         prob, x, _, _, k = solve_frames(points[rows], weight[rows], lengths, centre, fps, P[rows], floor, g, p,
                                         p.max_iterations, False, None, p.side_search, contact[rows], hold_globals=True,
                                         tol=POSE_TOL, silhouette=None if silhouette is None else silhouette.subset(rows),
-                                        hints=hints_on(hints, rows))
+                                        hints=hints_on(hints, rows), side_passes=p.side_search_passes)
         kept += k
         Pw = prob.solution(x)[4]
         lo = prev_end - a
@@ -696,7 +705,8 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
             P_s = seat_on_outline(P_s, f_sel, centre, nf_s, d_s, sil, facing_away(weight))
         prob, x, cost, ne, kept2 = solve_frames(points, weight, lengths, centre, fps, P_s, (nf_s, d_s), g_s, p,
                                                 p.max_iterations, False, (f_sel, 1e-4), p.side_search, contact,
-                                                tol=POSE_TOL, silhouette=sil, floor_prior=floor_prior, hints=hint(slice(None)))
+                                                tol=POSE_TOL, silhouette=sil, floor_prior=floor_prior, hints=hint(slice(None)),
+                                                side_passes=p.side_search_passes)
     elif not whole:  # the same in windows, camera and floor held
         f_sel, nf_s, d_s, _, P_s = prob.solution(x)
         g_s = np.concatenate([[np.log(f_sel), 0.0, 0.0, d_s], prob.globals_of(x)[4:]])

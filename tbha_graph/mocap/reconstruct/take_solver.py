@@ -376,30 +376,39 @@ def mirror(P: np.ndarray, frames: np.ndarray, group: tuple[int, ...], lengths: n
 
 
 def search_sides_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, iterations: int = 3, margin: int = 2,
-                    groups: tuple[tuple[int, ...], ...] = SIDE_GROUPS) -> tuple[np.ndarray, int]:
+                    groups: tuple[tuple[int, ...], ...] = SIDE_GROUPS, passes: int = 1) -> tuple[np.ndarray, int]:
     """Discrete search over depth sides with local re-optimisation: for each group of bones
     (:data:`SIDE_GROUPS`) and each out-of-plane run of frames (:func:`flip_segments`) the run is mirrored
     (:func:`mirror`); the current and the mirrored run (with ``margin`` frames either side) are re-optimised
     for ``iterations`` steps with the globals held — all windows of a group at once, as independent segments
     of one problem (``TakeData.breaks``) — and each mirror is kept when it ends cheaper than the current run.
-    Returns the joints and the number of mirrors kept."""
+    ``passes`` > 1 goes over the groups again, each group only where the mirrors kept since it was last searched
+    changed the body (a limb's side decided before its torso was turned is decided again after). Returns the
+    joints and the number of mirrors kept."""
     P = P.copy()
     L = prob.lengths_of(g)
     n = P.shape[0]
     kept = 0
-    for group in groups:
-        wins = []
-        for seg in flip_segments(P, group[0]):
-            if len(seg) < 2:
+    dirty = np.ones((len(groups), n), dtype=bool)  # frames where each group's sides are still to be (re)decided
+    for _ in range(passes):
+        for k, group in enumerate(groups):
+            wins = []
+            for seg in flip_segments(P, group[0]):
+                if len(seg) < 2:
+                    continue
+                lo, hi = max(seg[0] - margin, 0), min(seg[-1] + 1 + margin, n)
+                if dirty[k, lo:hi].any():
+                    wins.append((lo, hi, seg))
+            dirty[k] = False
+            if not wins:
                 continue
-            wins.append((max(seg[0] - margin, 0), min(seg[-1] + 1 + margin, n), seg))
-        if not wins:
-            continue
-        picks = solve_candidates(prob, g, [(lo, hi, [P, mirror(P, seg, group, L)]) for lo, hi, seg in wins], iterations)
-        for (lo, hi, _), (outs, cost) in zip(wins, picks):
-            if cost[1] < cost[0]:
-                P[lo:hi] = outs[1]
-                kept += 1
+            picks = solve_candidates(prob, g, [(lo, hi, [P, mirror(P, seg, group, L)]) for lo, hi, seg in wins], iterations)
+            for (lo, hi, _), (outs, cost) in zip(wins, picks):
+                if cost[1] < cost[0]:
+                    P[lo:hi] = outs[1]
+                    kept += 1
+                    dirty[:, lo:hi] = True  # every group's sides on these frames: to decide again on the next pass
+                    dirty[k, lo:hi] = False
     return P, kept
 
 
