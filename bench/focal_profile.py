@@ -71,7 +71,7 @@ def profile(take: str, points: str, true_lengths: bool, scales: list[float]) -> 
         P0, d0 = st.moved_in_depth(P_true, nf, d, s)
         g0 = st.globals_vector(f_true * s, d0, False, p.free_lengths)
         prob, x, cost, _, _ = st.solve_frames(pts, seen.astype(np.float64), lengths, centre, float(tr.fps), P0, (nf, d0),
-                                              g0, q, 40, False, (f_true * s, 1e-5), False, contact, tol=1e-7,
+                                              g0, q, 40, (f_true * s, 1e-5), False, contact, tol=1e-7,
                                               silhouette=sil)
         P = prob.solution(x)[4]
         out[f"cost_x{s:g}"] = cost

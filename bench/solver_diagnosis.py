@@ -120,7 +120,7 @@ def diagnose(take: str, perfect_tracks: bool = False, focal_grid: bool = True, t
     g0 = st.globals_vector(f_true, floor[1], False, p.free_lengths)
     contact = st.contacts_from_image(tr.points, tr.tracked, float(tr.fps))
     prob, x, c_truth, _, _ = st.solve_frames(tr.points, tr.tracked.astype(np.float64), lengths, centre, float(tr.fps), P_true,
-                                             floor, g0, p, 50, False, (f_true, 1e-4), False, contact, tol=1e-6,
+                                             floor, g0, p, 50, (f_true, 1e-4), False, contact, tol=1e-6,
                                              silhouette=sil)
     P = prob.solution(x)[4]
     out["from_truth_mm"] = seq_mpjpe_mm((P - t) @ R, T)  # camera -> world: R^T (X - t), rows
@@ -131,7 +131,7 @@ def diagnose(take: str, perfect_tracks: bool = False, focal_grid: bool = True, t
     own_floor = (cam.R[:, 1], float(-cam.R[:, 1] @ cam.t))
     prob_own, x_own, c_own, _, _ = st.solve_frames(tr.points, tr.tracked.astype(np.float64), lengths, centre, float(tr.fps),
                                         given["camera_frame_joints"], own_floor,
-                                        st.globals_vector(f_true, own_floor[1], False, p.free_lengths), p, 50, False,
+                                        st.globals_vector(f_true, own_floor[1], False, p.free_lengths), p, 50,
                                         (f_true, 1e-4), False, contact, tol=1e-6, silhouette=sil)
     out["own_cost_over_truth_minimum_pct"] = 100.0 * (c_own / c_truth - 1.0)
     if terms:  # which terms and which joints' reprojections make the difference (own minus the truth's minimum)

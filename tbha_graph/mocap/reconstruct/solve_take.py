@@ -403,7 +403,7 @@ def facing_away(weight: np.ndarray) -> np.ndarray:
     return (weight[:, TORSO_JOINTS] <= 0).all(axis=1) & (weight[:, JOINT_INDEX["head"]] > 0)
 
 
-def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: SolveTakeParams, free_offsets: bool,
+def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: SolveTakeParams,
                  focal_prior=None, contact=None, held_globals: np.ndarray | None = None,
                  silhouette: SilhouetteField | None = None, floor_prior=None,
                  hints: dict | None = None) -> tuple[TakeProblem, float]:
@@ -427,11 +427,11 @@ def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: Solve
                 sigma_sil=p.sigma_sil, sigma_hang=p.sigma_hang, sigma_facing=p.sigma_facing, sigma_kp=p.sigma_kp,
                 sigma_tpose=Weights.sigma_tpose if p.sigma_tpose is None else p.sigma_tpose)  # None: no T-pose data
     offsets = point_offsets_of(p)
-    return TakeProblem(data, bone_directions(P), nf, w, offsets, fixed_globals=held_globals, free_offsets=free_offsets,
+    return TakeProblem(data, bone_directions(P), nf, w, offsets, fixed_globals=held_globals, free_offsets=False,
                        focal_prior=focal_prior, free_lengths=p.free_lengths, floor_prior=floor_prior), d
 
 
-def solve_frames(points, weight, lengths, centre, fps, P0, floor, g_start, p, iterations, free_offsets, focal_prior,
+def solve_frames(points, weight, lengths, centre, fps, P0, floor, g_start, p, iterations, focal_prior,
                  side_search: bool, contact: np.ndarray | None = None, hold_globals: bool = False, tol: float = 1e-5,
                  silhouette: SilhouetteField | None = None, floor_prior=None, hints: dict | None = None,
                  side_passes: int = 1):
@@ -440,7 +440,7 @@ def solve_frames(points, weight, lengths, centre, fps, P0, floor, g_start, p, it
     ``silhouette`` and a detector's ``hints`` on these frames, if any. Returns ``(problem, x, cost, normal
     equations, flips kept)``."""
     def start(P, fl, g):
-        prob, _ = make_problem(points, weight, lengths, centre, fps, P, fl, p, free_offsets, focal_prior, contact,
+        prob, _ = make_problem(points, weight, lengths, centre, fps, P, fl, p, focal_prior, contact,
                                g if hold_globals else None, silhouette, floor_prior, hints)
         x = pack_initial(P, prob.ref)
         return prob, (x if hold_globals else np.concatenate([g, x]))
@@ -497,7 +497,7 @@ def solve_windows(points, weight, lengths, centre, fps, P0, floor, g, p: SolveTa
     for a, b in (progress(wins, total=len(wins), desc="pose windows") if progress else wins):
         rows = slice(a, b)
         prob, x, _, _, k = solve_frames(points[rows], weight[rows], lengths, centre, fps, P[rows], floor, g, p,
-                                        p.max_iterations, False, None, p.side_search, contact[rows], hold_globals=True,
+                                        p.max_iterations, None, p.side_search, contact[rows], hold_globals=True,
                                         tol=POSE_TOL, silhouette=None if silhouette is None else silhouette.subset(rows),
                                         hints=hints_on(hints, rows), side_passes=p.side_search_passes)
         kept += k
@@ -647,7 +647,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
             continue
         g0 = globals_vector(f0, float(-cam.R[:, 1] @ cam.t), False, p.free_lengths)
         prob_k, x_k, cost_k, _, kept = solve_frames(points[sub], weight[sub], lengths, centre, fps / step, P0[sub], cam,
-                                                    g0, q, p.calib_iterations, False, focal_prior, p.side_search,
+                                                    g0, q, p.calib_iterations, focal_prior, p.side_search,
                                                     contact[sub], floor_prior=floor_prior, hints=hint(sub, False))
         f_end = float(np.exp(prob_k.globals_of(x_k)[0]))
         sweep.append([round(f0, 1), round(f_end, 1), round(cost_k, 1)])
@@ -671,7 +671,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
             P_k, d_k = moved_in_depth(P_b, nf_b, d_b, f_end / f_best)
             gs = np.concatenate([[np.log(f_end), 0.0, 0.0, d_k], probs.globals_of(xs)[4:]])
             prob_k, x_k, cost_k, _, _ = solve_frames(points[sub], weight[sub], lengths, centre, fps / step, P_k,
-                                                     (nf_b, d_k), gs, q, p.calib_iterations, False,
+                                                     (nf_b, d_k), gs, q, p.calib_iterations,
                                                      focal_prior, False, contact[sub], floor_prior=floor_prior,
                                                      hints=hint(sub, False))
             cross.append([round(f_end, 1), round(float(np.exp(prob_k.globals_of(x_k)[0])), 1), round(cost_k, 1)])
@@ -687,7 +687,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
     P1 = interpolate_joints(probs.solution(xs)[4], sub, n)
     gs = np.concatenate([g_sub[:1], [0.0, 0.0, d0], g_sub[4:]])
     prob, x, cost, ne, _ = solve_frames(points[cam_rows], weight[cam_rows], lengths, centre, fps / k_cam, P1[cam_rows],
-                                        (nf0, d0), gs, q, p.max_iterations, False, focal_prior, False, contact[cam_rows],
+                                        (nf0, d0), gs, q, p.max_iterations, focal_prior, False, contact[cam_rows],
                                         floor_prior=floor_prior, hints=hint(cam_rows, False))
     kept2 = 0
     # uncertainty of the focal length (log f) from the normal equations, scaled by the fit's residual level
@@ -704,7 +704,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
         if sil is not None:  # where only the head is seen, the body first set on the floor at the outline's lowest row
             P_s = seat_on_outline(P_s, f_sel, centre, nf_s, d_s, sil, facing_away(weight))
         prob, x, cost, ne, kept2 = solve_frames(points, weight, lengths, centre, fps, P_s, (nf_s, d_s), g_s, p,
-                                                p.max_iterations, False, (f_sel, 1e-4), p.side_search, contact,
+                                                p.max_iterations, (f_sel, 1e-4), p.side_search, contact,
                                                 tol=POSE_TOL, silhouette=sil, floor_prior=floor_prior, hints=hint(slice(None)),
                                                 side_passes=p.side_search_passes)
     elif not whole:  # the same in windows, camera and floor held
@@ -716,7 +716,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
         P_w, kept2, report["windows"] = solve_windows(points, weight, lengths, centre, fps, P_w,
                                    (nf_s, d_s), g_s, p, contact, p.window_frames, p.window_overlap, progress, sil,
                                    hint(slice(None)))
-        prob, _ = make_problem(points, weight, lengths, centre, fps, P_w, (nf_s, d_s), p, False, None, contact, g_s, sil,
+        prob, _ = make_problem(points, weight, lengths, centre, fps, P_w, (nf_s, d_s), p, None, contact, g_s, sil,
                                hints=hint(slice(None)))
         x = pack_initial(P_w, prob.ref)
     f, nf, d, offs, P = prob.solution(x)
