@@ -162,7 +162,7 @@ class SolveTakeParams(BaseModel):
                                     "focal given, 1 / 2 passes 40.7 / 35.4 mm (200 frames), 26.9 / 19.0 (90); 16 renders "
                                     "x 3 solves (bench/solver_sweep.py --repeats 3) 100.0 / 97.9 mm (ranges 97.2-101.7 / "
                                     "97.1-98.9: within the scatter), the sample 50.9 / 53.2, turning takes 113.1 / 109.9; "
-                                    "the solve 55 % slower. So 1")
+                                    "the solve 55 % slower; hence one by default")
     sigma_hang: float | None = Field(1.0, gt=0, description="with a silhouette, on frames where only the head is tracked "
                                      "(the actor's back to the camera): each limb bone kept near straight down with this sd "
                                      "(unit vectors; None: off). No limb patch is seen there and the outline alone let the "

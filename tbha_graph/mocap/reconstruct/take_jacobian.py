@@ -326,9 +326,9 @@ def _silhouette(prob: TakeProblem, P: np.ndarray, g: np.ndarray, rows: slice) ->
 
 
 def _reprojection(prob: TakeProblem, P, g, thorax, d_thorax, pelvis, d_pelvis, out: np.ndarray, rows: slice) -> dict:
-    """Write ``d rep / dP`` (rows ``0..31``: point j's u, v) into ``out`` ``(n, F, 16, 3)`` (zero there on entry); returns what the globals'
-    derivatives reuse: ``Gq`` (d rep / d point, ``(n, 16, 2, 3)``), the points' ``axis`` and ``out`` directions
-    ``(n, 16, 3)`` and ``dlogf`` (d rep / d log f, ``(n, 16, 2)``)."""
+    """Write ``d rep / dP`` (rows ``0..31``: point j's u, v) into ``out`` ``(n, F, 16, 3)`` (zero there on entry);
+    returns what the globals' derivatives reuse: ``Gq`` (d rep / d point, ``(n, 16, 2, 3)``), the points' ``axis``
+    and ``out`` directions ``(n, 16, 3)`` and ``dlogf`` (d rep / d log f, ``(n, 16, 2)``)."""
     w, d = prob.w, prob.d
     n = P.shape[0]
     f = np.exp(g[0])
