@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..skeleton import N_JOINTS, PARENTS
-from .take_model import (ANKLES, AXIS_TRIPLES, HANG_BONES, HINGES, J, N_BONES, N_COVER, N_FACING, N_FRAME_RES, N_KP, N_SIL, N_TPOSE, PELVIS_JOINTS,
+from .take_model import (ANKLES, AXIS_TRIPLES, HANG_BONES, HINGES, J, N_BONES, N_COVER, N_FACING, N_KP, PELVIS_JOINTS,
                          PELVIS_SIDE, PER_FRAME, SIL_PAIRS, THORAX_JOINTS, TORSO_PAIRS, TPOSE_PAIRS, TakeProblem, bottom_residual,
                          cover_residuals, cover_segments, hang_residual, keypoint_targets, robust_slope, sil_residuals,
                          torso_unseen, unit,
@@ -191,16 +191,15 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
             parts["bottom"] = np.concatenate([bot["dr_dS"], bot["dlogf"][:, None], bot["A"]], axis=1)
             parts["sil_dlogf"] = sil["dlogf"]
             parts["cover_dlogf"] = cov["dlogf"]
-    tp = N_TPOSE if d.holds_tpose else 0
     if d.keypoints is not None:  # before the facing block: robust((uv - keypoint) w / sigma) per joint and axis
-        row = prob.n_frame_res - N_KP - (N_FACING if d.facing is not None else 0) - tp
+        row = prob.blocks["keypoints"].start
         kp = _keypoints(prob, P, g, rows)
         for j in range(N_JOINTS):
             out[:, row + 2 * j:row + 2 * j + 2, j] += kp["dP"][:, j]
         if parts is not None:
             parts["kp_dlogf"] = kp["dlogf"]
     if d.facing is not None:  # robust((front - hint) / sigma) per coordinate, thorax then pelvis
-        row = prob.n_frame_res - N_FACING - tp
+        row = prob.blocks["facing"].start
         hint = np.asarray(d.facing, dtype=np.float64)[rows]
         on = (np.linalg.norm(hint, axis=-1) > 0.5)  # (n, 2)
         for k, (fr, dfr, fj) in enumerate(((thorax, d_thorax, THORAX_JOINTS), (pelvis, d_pelvis, PELVIS_JOINTS))):
@@ -209,7 +208,7 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
             for jj, Dj in zip(fj, dfr):
                 out[:, row + 3 * k:row + 3 * k + 3, jj] += slope[..., None] * Dj
     if d.holds_tpose:  # the last block: d (unit(P_b - P_a) - unit(P_e - P_c)) = U1 (dP_b - dP_a) - U2 (dP_e - dP_c)
-        row = prob.n_frame_res - N_TPOSE
+        row = prob.blocks["tpose"].start
         on = np.asarray(d.tpose, dtype=np.float64)[rows] / w.sigma_tpose
         if on.any():
             a, b, c, e = (TPOSE_PAIRS[:, i] for i in range(4))
@@ -396,8 +395,9 @@ def global_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: dict
     # focal: the image scales about the centre
     Jf[:, : 2 * N_JOINTS, 0] = parts["dlogf"].reshape(n, -1)
     if "sil_dlogf" in parts:  # the silhouette's points scale about the centre too; the support moves with the floor
-        Jf[:, N_FRAME_RES:N_FRAME_RES + len(SIL_PAIRS), 0] = parts["sil_dlogf"]
-        Jf[:, N_FRAME_RES + N_SIL:N_FRAME_RES + N_SIL + N_COVER, 0] = parts["cover_dlogf"]
+        sil = prob.blocks["silhouette"].start
+        Jf[:, sil:sil + len(SIL_PAIRS), 0] = parts["sil_dlogf"]
+        Jf[:, prob.blocks["cover"], 0] = parts["cover_dlogf"]
     if "kp_dlogf" in parts:  # the detector's keypoints scale about the centre too
         row = F - N_KP - (N_FACING if d.facing is not None else 0)
         Jf[:, row:row + N_KP, 0] = parts["kp_dlogf"]
@@ -414,13 +414,13 @@ def global_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: dict
     if d.silhouette is not None:
         low = np.argmin(h, axis=1)
         act = (np.min(h, axis=1) > w.support_band) / w.sigma_support
-        Jf[:, N_FRAME_RES + len(SIL_PAIRS), 1:4] = act[:, None] * dh[np.arange(n), low]
+        Jf[:, prob.blocks["silhouette"].start + len(SIL_PAIRS), 1:4] = act[:, None] * dh[np.arange(n), low]
         # bottom: S = A - (A.n + d) n; dS/d(g1, g2) = -(n A^T + (A.n + d) I) dn/d(g1, g2), dS/dd = -n
         bt = parts["bottom"]
         dr_dS, dlf, A = bt[:, :3], bt[:, 3], bt[:, 4:]
         hA = A @ nf + dfl
         dSdn = -(nf[None, :, None] * A[:, None, :] + hA[:, None, None] * _EYE)  # (n, 3, 3)
-        col = N_FRAME_RES + N_SIL - 1
+        col = prob.blocks["silhouette"].stop - 1
         Jf[:, col, 0] = dlf
         Jf[:, col, 1:3] = ((dr_dS[:, None, :] @ dSdn)[:, 0]) @ f1
         Jf[:, col, 3] = -(dr_dS @ nf)

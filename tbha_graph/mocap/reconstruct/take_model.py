@@ -588,6 +588,24 @@ def seat_on_outline(P: np.ndarray, f: float, centre: np.ndarray, nf: np.ndarray,
     return P + (best - 1.0)[:, None, None] * P[:, None, 0]
 
 
+def frame_blocks(d: TakeData) -> dict[str, slice]:
+    """Where each kind of per-frame residual sits in a frame's block of :meth:`TakeProblem.frame_terms`, in order:
+    the terms every take has (the silhouette's four with zero rows without a silhouette), then the keypoints,
+    the facing hint and the opening T-pose, each only with its data. One layout for the residuals' costs
+    (:meth:`TakeProblem.term_costs`) and their Jacobian (:func:`.take_jacobian.residual_jacobian`)."""
+    has_sil = d.silhouette is not None
+    sizes = [("reprojection", N_JOINTS * 2), ("torso", len(TORSO_PAIRS)), ("hinge", len(HINGES)), ("below_floor", 2),
+             ("contact", 2), ("pose", 6), ("silhouette", N_SIL if has_sil else 0), ("cover", N_COVER if has_sil else 0),
+             ("upright", 1 if has_sil else 0), ("hang", N_HANG if has_sil else 0)]
+    sizes += [(nm, k) for nm, k, on in (("keypoints", N_KP, d.keypoints is not None), ("facing", N_FACING, d.facing is not None),
+                                         ("tpose", N_TPOSE, d.holds_tpose)) if on]
+    out, row = {}, 0
+    for nm, k in sizes:
+        out[nm] = slice(row, row + k)
+        row += k
+    return out
+
+
 @dataclass
 class Layout:
     """Where each unknown lives in ``x``; which globals are free."""
@@ -647,9 +665,8 @@ class TakeProblem:
         # (up (3,) camera frame, sigma radians): the floor's normal as the room's lines show it
         self.floor_prior = None if floor_prior is None else (unit(np.asarray(floor_prior[0], dtype=np.float64)), float(floor_prior[1]))
         self.n_glob = 0 if fixed_globals is not None else self.layout.n_globals
-        self.n_frame_res = (N_FRAME_RES + (N_SIL + N_COVER + 1 + N_HANG if data.silhouette is not None else 0)
-                            + (N_KP if data.keypoints is not None else 0) + (N_FACING if data.facing is not None else 0)
-                            + (N_TPOSE if data.holds_tpose else 0))
+        self.blocks = frame_blocks(data)
+        self.n_frame_res = next(reversed(self.blocks.values())).stop
         self.set_refs(ref, n_ref)
 
     def set_refs(self, ref: np.ndarray, n_ref: np.ndarray) -> None:
@@ -794,16 +811,7 @@ class TakeProblem:
         P = self.joints_from_frames(self.frames_of(x), self.lengths_of(g))
         F = self.frame_terms(P, g)
         acc, slide = self.coupled_terms(P, self.floor(g)[0])
-        fac = N_FACING if self.d.facing is not None else 0
-        kp = N_KP if self.d.keypoints is not None else 0
-        tp = N_TPOSE if self.d.holds_tpose else 0
-        sil = self.n_frame_res - N_FRAME_RES - fac - kp - tp
-        extra = [N_COVER, 1, N_HANG] if sil else [0, 0, 0]  # the cover, upright and hang terms end the silhouette's block
-        k = np.cumsum([0, N_JOINTS * 2, len(TORSO_PAIRS), len(HINGES), 2, 2, 6, sil - sum(extra)] + extra + [kp, fac, tp])
-        names = ("reprojection", "torso", "hinge", "below_floor", "contact", "pose", "silhouette", "cover", "upright", "hang",
-                 "keypoints", "facing", "tpose")
-        out = {nm: 0.5 * float(np.sum(F[:, k[i]:k[i + 1]] ** 2)) for i, nm in enumerate(names)
-               if nm not in ("keypoints", "facing", "tpose") or k[i + 1] > k[i]}  # optional terms only with their data
+        out = {nm: 0.5 * float(np.sum(F[:, rows] ** 2)) for nm, rows in self.blocks.items()}
         out.update(acceleration=0.5 * float(np.sum(acc ** 2)), slide=0.5 * float(np.sum(slide ** 2)),
                    priors=0.5 * float(np.sum(self.global_terms(g) ** 2)))
         return out
