@@ -75,7 +75,8 @@ def test_block_normal_equations_equal_the_dense_ones(truth, free_offsets, free_l
         kp = 700.0 * P[..., :2] / P[..., 2:3] + centre + np.random.default_rng(3).normal(scale=4.0, size=(9, 16, 2))
         kp[::2][:, KP_PAIRS.ravel()] = kp[::2][:, KP_PAIRS[:, ::-1].ravel()]
         hints = {"keypoints": kp, "kp_weight": np.full((9, 16), 0.8),
-                 "facing": np.stack(fronts(P), axis=1) + np.array([0.1, 0.0, -0.1])}
+                 "facing": np.stack(fronts(P), axis=1) + np.array([0.1, 0.0, -0.1]),
+                 "tpose": np.arange(9) < 5}  # and the opening T-pose's rows after them (the focal's column too)
     prob, d = problem(truth, P, uv + 0.7, centre, L, Weights(support_band=-0.03 if sil else 0.1, upright_sin=0.02), free_offsets=free_offsets,
                       free_lengths=free_lengths, silhouette=silhouette, **hints)
     prob.d.away = np.arange(9) % 3 == 0 if sil else None
@@ -114,6 +115,7 @@ def test_block_normal_equations_equal_the_dense_ones(truth, free_offsets, free_l
         assert np.abs(inside[:, N_FRAME_RES:N_FRAME_RES + len(SIL_PAIRS)]).max() > 0.5  # the inside term active too
         assert prob.term_costs(x)["cover"] > 1.0
         assert prob.term_costs(x)["keypoints"] > 1.0 and prob.term_costs(x)["facing"] > 0.1
+        assert prob.term_costs(x)["tpose"] > 1.0
     ne, cost = normal_equations(prob, x)
     got = ne.solve(0.1)
     assert cost == pytest.approx(0.5 * r0 @ r0, rel=1e-12)

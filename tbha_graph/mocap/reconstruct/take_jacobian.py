@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..skeleton import N_JOINTS, PARENTS
-from .take_model import (ANKLES, AXIS_TRIPLES, HANG_BONES, HINGES, J, N_BONES, N_COVER, N_FACING, N_KP, PELVIS_JOINTS,
+from .take_model import (ANKLES, AXIS_TRIPLES, HANG_BONES, HINGES, J, N_BONES, N_COVER, N_KP, PELVIS_JOINTS,
                          PELVIS_SIDE, PER_FRAME, SIL_PAIRS, THORAX_JOINTS, TORSO_PAIRS, TPOSE_PAIRS, TakeProblem, bottom_residual,
                          cover_residuals, cover_segments, hang_residual, keypoint_targets, robust_slope, sil_residuals,
                          torso_unseen, unit,
@@ -399,8 +399,7 @@ def global_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: dict
         Jf[:, sil:sil + len(SIL_PAIRS), 0] = parts["sil_dlogf"]
         Jf[:, prob.blocks["cover"], 0] = parts["cover_dlogf"]
     if "kp_dlogf" in parts:  # the detector's keypoints scale about the centre too
-        row = F - N_KP - (N_FACING if d.facing is not None else 0)
-        Jf[:, row:row + N_KP, 0] = parts["kp_dlogf"]
+        Jf[:, prob.blocks["keypoints"], 0] = parts["kp_dlogf"]
     # floor: ankle heights h = P_a . nf + d and the slides' horizontal projection
     f1 = unit_jacobian(prob.n_ref + g[1] * prob.f1 + g[2] * prob.f2)[1] @ np.stack([prob.f1, prob.f2], axis=1)  # (3, 2)
     nf, dfl = prob.floor(g)
