@@ -11,7 +11,14 @@ group exchanged): ``pa_mm`` / ``pa_true_labels_mm`` (12 limb joints, per-frame s
 ``bench/mediapipe_compare.py``) and the model's total cost of each, ``cost`` / ``cost_true_labels``: the accuracy
 that wrong labels cost, and whether the model itself would prefer the right ones.
 
+With ``--suit``: the fifteen suit renders of ``bench/solver_sweep.py`` (the three solver renders and the twelve
+turning takes) through ``pipelines/default.yaml``, where Pose runs only where no torso patch is seen and the
+suit tracker's tracks are its ``suit`` input; per take ``frames``, and ``arms_wrong`` / ``legs_wrong`` with the
+labels decided from the opening alone (``detect.sides_from_suit`` false) and with the suit's patches deciding
+them where it sees them (``_suit``, the default), then the totals.
+
     python bench/mediapipe_sides.py [--takes sample,walk131_01_f500_low] [--solve]
+    python bench/mediapipe_sides.py --suit
 """
 from __future__ import annotations
 
@@ -100,12 +107,44 @@ def score(name: str, with_solve: bool) -> dict:
     return out
 
 
+def score_suit() -> None:
+    """``--suit``: wrong frames on the suit renders without and with the suit's patches as the reference."""
+    import solver_sweep
+    from tbha_graph.core.cache import Cache
+    from tbha_graph.mocap.bundles.tracks import read_tracks
+
+    cache = Cache(Path.home() / ".cache" / "tbha-graph")
+    total = {}
+    for take in [t[0] for t in solver_sweep.SOLVER_TAKES] + solver_sweep.TURNING:
+        name = take if isinstance(take, str) else f"{take[0]}_{take[1]}"
+        line = {"take": name}
+        for key, from_suit in (("", False), ("_suit", True)):
+            graph, truth_ref = solver_sweep.take_graph(take, True, {"detect.sides_from_suit": from_suit})
+            run = run_graph(graph, outputs=["detect", truth_ref.split(".")[0]], cache=cache)
+            kt = read_tracks(run.output("detect.tracks"))
+            truth2d = np.asarray(run.output(truth_ref)["joints2d"])[:kt.n_frames]
+            detected = kt.tracked.any(axis=1)
+            line["frames"] = int(detected.sum())
+            for g, parts in GROUPS.items():
+                line[f"{g}_wrong{key}"] = int((wrong_frames(kt.points, truth2d, parts) & detected).sum())
+        for k, v in line.items():
+            if k != "take":
+                total[k] = total.get(k, 0) + v
+        print(" ".join(f"{k}={v}" for k, v in line.items()), flush=True)
+    print(" ".join(f"total_{k}={v}" for k, v in total.items()))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--takes", default=",".join(list(EVAL) + list(FIT)), help="comma-separated names of "
                     "bench/mediapipe_renders.py's EVAL and FIT")
     ap.add_argument("--solve", action="store_true", help="also solve on the labels as given and on the truth's")
+    ap.add_argument("--suit", action="store_true", help="the suit renders through default.yaml instead, without and with "
+                    "the suit's patches deciding the labels")
     a = ap.parse_args()
+    if a.suit:
+        score_suit()
+        return
     for name in a.takes.split(","):
         r = score(name, a.solve)
         print(" ".join(f"{k}={v:.1f}" if isinstance(v, float) else f"{k}={v}" for k, v in r.items()), flush=True)

@@ -69,6 +69,30 @@ def test_swapped_stretches_are_swapped_back():
     assert not det["arms"][0] and (det["arms"] != truth["arms"]).all()
 
 
+def test_a_reference_that_knows_the_sides_decides_them_where_the_opening_would_not():
+    """A take seen from behind all along: the detector labels the figure as facing the camera (its left on the
+    image's right) and flips for ten frames in the middle. A suit tracker that knows the limbs' sides on the first
+    and last 20 frames makes every frame right; without it the opening's facing-the-camera rule makes every frame
+    wrong (but the ten flipped ones)."""
+    seen = _landmarks_walking()  # where each landmark is in the image, labelled as facing the camera
+    n = len(seen)
+    wrong_all = {g: np.ones(n, bool) for g in ("arms", "legs")}
+    truth = apply_sides(seen, wrong_all)  # the figure faces away: its left is on the image's left
+    flip = {g: (np.arange(n) >= 50) & (np.arange(n) < 60) for g in ("arms", "legs")}
+    detector = apply_sides(seen, flip)
+    reference = np.full_like(truth, np.nan)
+    limbs = [MEDIAPIPE_POSE.index(f"{side}_{part}") for side in ("left", "right")
+             for part in ("shoulder", "elbow", "wrist", "hip", "knee", "ankle")]
+    for rows in (slice(0, 20), slice(n - 20, n)):
+        reference[rows, limbs] = truth[rows, limbs] + np.random.default_rng(2).normal(0, 3.0, truth[rows, limbs].shape)
+    got = consistent_sides(detector, np.ones(n, bool), reference=reference)
+    for g in ("arms", "legs"):
+        np.testing.assert_array_equal(got[g], wrong_all[g] ^ flip[g], err_msg=g)
+    np.testing.assert_allclose(apply_sides(detector, {g: got[g] for g in ("arms", "legs")})[:, limbs], truth[:, limbs])
+    alone = consistent_sides(detector, np.ones(n, bool))
+    assert not alone["arms"][:50].any() and not alone["legs"][:50].any()
+
+
 def test_undetected_frames_are_skipped_and_pairs_cover_every_side():
     lm = _landmarks_walking()
     bad, truth = _swap_stretches(lm, [(40, 80)])

@@ -12,7 +12,11 @@ state 0 keeps the detector's labels, state 1 swaps them (arms and legs decided t
 a cost for a torso whose shoulders and hips face opposite ways). The cost of a path is the image distance each
 landmark moves from the previous frame, so the path that moves the limbs least wins; the first frame's state
 is the one that puts the person's left on the image's right (the take opens facing the camera, as the
-solver needs anyway) — or, with ``start="detector"``, the detector's own labels.
+solver needs anyway) — or, with ``start="detector"``, the detector's own labels. Given a ``reference`` that
+knows the sides (a suit tracker's left and right patches), each frame's states also cost how much farther their
+landmarks are from it than the other state's, and that decides instead of the opening: on the 15 suit renders of
+``bench/solver_sweep.py`` (Pose where no torso patch is seen, 1304 frames) the wrong groups (arms 465, legs 468)
+went to 20 and 26 (``python bench/mediapipe_sides.py --suit``).
 """
 from __future__ import annotations
 
@@ -72,8 +76,18 @@ def _motion_cost(S: np.ndarray) -> np.ndarray:
     return np.nan_to_num(d, nan=0.0).sum(axis=-1)
 
 
+def _anchor_cost(S: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """``(m, 2)``: per frame and state the image distance of the group's landmarks ``S`` ``(m, 2, 2k, 2)`` from the
+    reference points ``R`` ``(m, 2k, 2)`` (the same landmarks, NaN where unknown), less the smaller of the two: 0
+    for the state nearer the reference, the margin by which the other is farther for it (about 0 side-on, where
+    the reference cannot tell the sides apart)."""
+    d = np.nan_to_num(np.linalg.norm(S - R[:, None], axis=-1), nan=0.0).sum(axis=-1)
+    return d - d.min(axis=1, keepdims=True)
+
+
 def consistent_sides(points: np.ndarray, detected: np.ndarray, layout: Layout = MEDIAPIPE_POSE,
-                     start: str = "facing_camera", coupling: float = 2.0) -> dict[str, np.ndarray]:
+                     start: str = "facing_camera", coupling: float = 2.0,
+                     reference: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Per group (:func:`mirror_pairs`) a bool ``(n,)``: True where the detector's left/right labels are to be
     swapped. ``points`` ``(n, L, 2)`` image landmarks (any unit), ``detected`` ``(n,)`` bool (frames without a
     detection are skipped: the path continues across them).
@@ -92,7 +106,12 @@ def consistent_sides(points: np.ndarray, detected: np.ndarray, layout: Layout = 
     half of 131_01's frames but broke the turning takes (60+ frames each), so there is none; neither is a cost on
     the labelled torso width jumping between frames (round 11: weight 3 fixed half of 131_01 and broke the hop,
     10 fixed the spin and broke another turn). ``python bench/mediapipe_sides.py --solve`` counts the frames
-    still wrong per render and what they cost the solve (131_01: PA 108 mm, 72 mm on the truth's labels)."""
+    still wrong per render and what they cost the solve (131_01: PA 108 mm, 72 mm on the truth's labels).
+
+    ``reference`` ``(n, L, 2)`` (same layout and unit as ``points``, NaN where unknown): where another source
+    knows which landmark is which (a suit tracker's left and right patches), each state costs how much farther
+    its landmarks are from those points than the other state's (:func:`_anchor_cost`), so the labels follow that
+    source where it sees the limbs and continuity only bridges where it does not (the actor's back to the camera)."""
     pts = np.asarray(points, dtype=np.float64)
     idx = np.flatnonzero(np.asarray(detected, dtype=bool))
     n = pts.shape[0]
@@ -126,8 +145,13 @@ def consistent_sides(points: np.ndarray, detected: np.ndarray, layout: Layout = 
             s_ = sdx * (1 - 2 * a)
             h_ = hdx * (1 - 2 * leg)
             unary[:, 2 * a + leg] = np.where(s_ * h_ < 0, coupling * np.minimum(np.abs(s_), np.abs(h_)), 0.0)
-    fa, fl = first_cost(Sa), first_cost(Sl)
-    unary[0] += (fa[:, None] + fl[None, :]).reshape(4)
+    if reference is None:
+        fa, fl = first_cost(Sa), first_cost(Sl)
+        unary[0] += (fa[:, None] + fl[None, :]).reshape(4)
+    else:  # the reference decides where it knows the sides, instead of the opening's facing
+        ref = np.asarray(reference, dtype=np.float64)[idx]
+        ca, cl = (_anchor_cost(S, _group_states(ref, pairs[g])[:, 0]) for S, g in ((Sa, "arms"), (Sl, "legs")))
+        unary += (ca[:, :, None] + cl[:, None, :]).reshape(m, 4)
     path = _viterbi(step, np.nan_to_num(unary))
     out["arms"][idx] = path >= 2
     out["legs"][idx] = (path % 2).astype(bool)

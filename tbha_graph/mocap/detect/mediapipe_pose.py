@@ -34,7 +34,11 @@ What comes out and how (documented definitions):
 * **left/right**: MediaPipe decides a person's left from their look and, on a person whose face it cannot
   see, often swaps left and right for whole stretches (141 of the sample's 210 frames); with
   ``sides: consistent`` (default) the labels are re-decided so the limbs move continuously from an opening
-  facing the camera (:mod:`.left_right`); ``sides: detector`` keeps MediaPipe's. Where the labelled torso
+  facing the camera (:mod:`.left_right`), or, with the ``suit`` input, so they agree with the suit tracker's
+  left and right patches where it sees them (continuity bridging where it does not: the actor's back to the
+  camera; ``sides_from_suit``; on the 15 suit renders of ``bench/solver_sweep.py``, 1304 frames, the arms' labels
+  wrong on 465 -> 20 of them, the legs' 468 -> 26: ``python bench/mediapipe_sides.py --suit``);
+  ``sides: detector`` keeps MediaPipe's. Where the labelled torso
   then shows its back (:func:`back_views`) the labels came from continuity alone: with frames ``all`` those
   frames are doubtful (the tracks' ``doubtful``: "ambiguous identity", in ``metrics.json``'s
   ``doubtful_ranges`` and on the overlay) and a run of 10 or more frames is a warning naming it (on 131_01's
@@ -96,6 +100,9 @@ class MediaPipePoseParams(TorsoFractions):
     sides: Literal["consistent", "detector"] = Field(
         "consistent", description="left/right labels: 'consistent' re-decides them so limbs move continuously from an "
                                   "opening facing the camera; 'detector' keeps MediaPipe's")
+    sides_from_suit: bool = Field(True, description="with sides 'consistent' and the suit input: the suit tracker's left and "
+                                                   "right patches decide the labels where it sees them (False: continuity "
+                                                   "from an opening facing the camera alone)")
     offsets: Literal["calibrated", "none"] = Field(
         "calibrated", description="'calibrated': the tracks carry the fitted offsets of MediaPipe's landmarks from our joint "
                                   "centres (mediapipe_offsets.json, used by reconstruct.solve_take); 'none': landmarks are joint centres")
@@ -348,6 +355,23 @@ def unseen_torso_runs(suit: dict, n_frames: int, margin: int) -> tuple[list[tupl
     return [(int(r[0]), int(r[-1]) + 1) for r in runs_of(np.cumsum(wide)[:n_frames] > 0, min_len=1)], len(idx)
 
 
+def suit_landmarks(suit: dict, layout, n_frames: int) -> np.ndarray:
+    """The suit tracker's points ``(n, L, 2)`` px in a detector's landmark layout: each limb joint's tracked point
+    at the landmark of the same name (``left_shoulder`` ... ``right_ankle``), NaN elsewhere and where untracked;
+    the reference that tells :func:`.left_right.consistent_sides` the detector's left from its right."""
+    from ..bundles.tracks import read_tracks
+
+    tr = read_tracks(suit)
+    if tr.n_frames != n_frames:
+        raise NodeError(f"the suit's tracks have {tr.n_frames} frames, the video clip {n_frames}",
+                        hint="connect the tracks of the same video (suit: track.tracks)")
+    out = np.full((tr.n_frames, layout.size, 2), np.nan)
+    for j, name in enumerate(JOINT_NAMES):
+        if name.startswith(("left_", "right_")) and name in layout.landmarks:
+            out[:, layout.index(name)] = np.where(tr.tracked[:, j, None], tr.points[:, j], np.nan)
+    return out
+
+
 def no_keypoints(video: VideoClip, p: MediaPipePoseParams) -> tuple[dict, dict]:
     """``(tracks, motion)`` with nothing tracked on any of the clip's frames (Pose not run)."""
     n = video.n_frames
@@ -410,7 +434,8 @@ def prefetched_rgb_frames_range(video: VideoClip, start: int, stop: int) -> Iter
 @node("detect.mediapipe_pose", version=7,
       inputs={"video": VIDEO,
               "suit": optional(TRACKS2D, "a suit tracker's tracks on the same video: with frames 'torso_unseen', Pose runs "
-                                         "only where they see no torso patch")},
+                                         "only where they see no torso patch; with sides 'consistent', its left and right "
+                                         "patches decide MediaPipe's left and right where it sees them")},
       outputs={"tracks": TRACKS2D, "motion": MOTION,
                "report": report_port("frames run, detected and tracked backwards, frames whose left/right labels were "
                                      "swapped back (arms, legs, face); no timings (the log has them): a report is data, "
@@ -460,7 +485,10 @@ def mediapipe_pose(ctx, video, suit=None):
     detected = ~np.isnan(raw.image).all(axis=(1, 2))
     swaps = {g: np.zeros(raw.image.shape[0], dtype=bool) for g in GROUPS}
     if p.sides == "consistent":
-        swaps = consistent_sides(raw.image[..., :2] * np.array([video.width, video.height]), detected)
+        use_suit = suit is not None and p.sides_from_suit
+        reference = suit_landmarks(suit, MEDIAPIPE_POSE, raw.image.shape[0]) if use_suit else None
+        swaps = consistent_sides(raw.image[..., :2] * np.array([video.width, video.height]), detected,
+                                 reference=reference)
     take = MediaPipeTake(apply_sides(raw.image, swaps), apply_sides(raw.world, swaps), raw.first_frame, raw.fps,
                          raw.width, raw.height)
     swapped = np.stack([swaps[g] for g in GROUPS], axis=1)
