@@ -14,7 +14,13 @@ Per take one line of ``name=value``:
   ``detect_fps``: the detection node alone (decoding overlapped); ``solve_fps``: the solver node alone;
 * ``focal_err_pct``: the solved focal length against the render's.
 
-    python bench/mediapipe_compare.py [--takes sample,hop131_03_f1000_high] [--set NODE.PARAM=VALUE ...]
+The solver's answer swings with small changes of its keypoints (the depth sides and turns it picks), so one run's
+figure can be luck. ``--repeats K`` solves the take's keypoints K more times as the pipeline's ``reconstruct``
+node does, the first as they are and the others with Gaussian noise of ``--jitter-px`` (0.5 px; seeds 1 .. K-1)
+added, and prints the solver's own joints' PA-MPJPE over them (before the pipeline's smoothing, every frame):
+``solver_pa_mpjpe_mm_mean`` / ``_min`` / ``_max`` and ``ratio_mean`` (MediaPipe's over that mean).
+
+    python bench/mediapipe_compare.py [--takes sample,hop131_03_f1000_high] [--set NODE.PARAM=VALUE ...] [--repeats 5]
 """
 from __future__ import annotations
 
@@ -60,7 +66,7 @@ def world_joints(world: np.ndarray) -> np.ndarray:
     return joints16_from_landmarks(xyz, np.nan_to_num(world[..., 3]), MEDIAPIPE_POSE)[0]
 
 
-def score(name: str, sets: dict, jobs: int | None = None) -> dict:
+def score(name: str, sets: dict, jobs: int | None = None, repeats: int = 0, jitter_px: float = 0.5) -> dict:
     folder = render(name)
     vars = {"video": str(folder / "sample.mp4"), "ground_truth": str(folder / "ground_truth.npz")}
     graph = load_graph(ROOT / "pipelines" / "mediapipe.yaml", sets=sets, vars=vars)
@@ -97,6 +103,19 @@ def score(name: str, sets: dict, jobs: int | None = None) -> dict:
         "focal_err_pct": (float(metrics.get("focal_px", np.nan)) / f_true - 1.0) * 100.0,
     }
     out["ratio"] = out["mediapipe_world_pa_mpjpe_mm"] / out["ours_pa_mpjpe_mm"]
+    if repeats > 0:
+        from mediapipe_sides import solve
+
+        tracks = run.output("detect.tracks")
+        pas = []
+        for r in range(repeats):
+            jittered = dict(tracks)
+            if r > 0:
+                points = np.asarray(tracks["points"], dtype=np.float64)
+                jittered["points"] = points + np.random.default_rng(r).normal(0.0, jitter_px, points.shape)
+            pas.append(solve(graph, jittered, run.output("lens.lens"), run.output("body.body"), truth)[0])
+        out.update({"solver_pa_mpjpe_mm_mean": float(np.mean(pas)), "solver_pa_mpjpe_mm_min": min(pas),
+                    "solver_pa_mpjpe_mm_max": max(pas), "ratio_mean": out["mediapipe_world_pa_mpjpe_mm"] / float(np.mean(pas))})
     return out
 
 
@@ -106,14 +125,19 @@ def main() -> None:
     ap.add_argument("--set", action="append", default=[], metavar="NODE.PARAM=VALUE", help="passed to the pipeline")
     ap.add_argument("--jobs", type=int, default=None, help="nodes run at once (tbha-run --jobs; default: the pipeline's 'jobs: 2', "
                     "MediaPipe and the room's lines at the same time)")
+    ap.add_argument("--repeats", type=int, default=0, help="also solve the keypoints this many times (the first as they "
+                    "are, the others jittered) and print the solver's PA-MPJPE over them")
+    ap.add_argument("--jitter-px", type=float, default=0.5, help="sd of the noise added to the keypoints in repeats 2..K, pixels")
     a = ap.parse_args()
+    if a.repeats < 0 or a.jitter_px < 0:
+        ap.error("--repeats and --jitter-px must be >= 0")
     sets = {}
     for s in a.set:
         k, _, v = s.partition("=")
         sets[k] = yaml.safe_load(v)
     for name in a.takes.split(","):
         try:
-            r = score(name, sets, a.jobs)
+            r = score(name, sets, a.jobs, a.repeats, a.jitter_px)
         except Exception as e:  # noqa: BLE001 - one take failing is a result too; the others still run
             print(f"take={name} error={type(e).__name__}: {str(e).splitlines()[0]}", flush=True)
             continue
