@@ -91,6 +91,8 @@ def test_a_reference_that_knows_the_sides_decides_them_where_the_opening_would_n
     np.testing.assert_allclose(apply_sides(detector, {g: got[g] for g in ("arms", "legs")})[:, limbs], truth[:, limbs])
     alone = consistent_sides(detector, np.ones(n, bool))
     assert not alone["arms"][:50].any() and not alone["legs"][:50].any()
+    blind = consistent_sides(detector, np.ones(n, bool), reference=np.full_like(truth, np.nan))  # knows nothing:
+    assert all((blind[g] == alone[g]).all() for g in ("arms", "legs"))  # the opening's rule, as without one
 
 
 def test_undetected_frames_are_skipped_and_pairs_cover_every_side():

@@ -111,7 +111,8 @@ def consistent_sides(points: np.ndarray, detected: np.ndarray, layout: Layout = 
     ``reference`` ``(n, L, 2)`` (same layout and unit as ``points``, NaN where unknown): where another source
     knows which landmark is which (a suit tracker's left and right patches), each state costs how much farther
     its landmarks are from those points than the other state's (:func:`_anchor_cost`), so the labels follow that
-    source where it sees the limbs and continuity only bridges where it does not (the actor's back to the camera)."""
+    source where it sees the limbs and continuity only bridges where it does not (the actor's back to the camera);
+    a reference that knows no landmark on the detected frames leaves the opening's rule in force."""
     pts = np.asarray(points, dtype=np.float64)
     idx = np.flatnonzero(np.asarray(detected, dtype=bool))
     n = pts.shape[0]
@@ -145,11 +146,11 @@ def consistent_sides(points: np.ndarray, detected: np.ndarray, layout: Layout = 
             s_ = sdx * (1 - 2 * a)
             h_ = hdx * (1 - 2 * leg)
             unary[:, 2 * a + leg] = np.where(s_ * h_ < 0, coupling * np.minimum(np.abs(s_), np.abs(h_)), 0.0)
-    if reference is None:
+    ref = None if reference is None else np.asarray(reference, dtype=np.float64)[idx]
+    if ref is None or not np.isfinite(ref).any():
         fa, fl = first_cost(Sa), first_cost(Sl)
         unary[0] += (fa[:, None] + fl[None, :]).reshape(4)
     else:  # the reference decides where it knows the sides, instead of the opening's facing
-        ref = np.asarray(reference, dtype=np.float64)[idx]
         ca, cl = (_anchor_cost(S, _group_states(ref, pairs[g])[:, 0]) for S, g in ((Sa, "arms"), (Sl, "legs")))
         unary += (ca[:, :, None] + cl[:, None, :]).reshape(m, 4)
     path = _viterbi(step, np.nan_to_num(unary))

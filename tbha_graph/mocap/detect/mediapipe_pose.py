@@ -38,7 +38,7 @@ What comes out and how (documented definitions):
   left and right patches where it sees them (continuity bridging where it does not: the actor's back to the
   camera; ``sides_from_suit``; on the 15 suit renders of ``bench/solver_sweep.py``, 1304 frames, the arms' labels
   wrong on 465 -> 20 of them, the legs' 468 -> 26: ``python bench/mediapipe_sides.py --suit``);
-  ``sides: detector`` keeps MediaPipe's. Where the labelled torso
+  ``sides: detector`` keeps MediaPipe's. Without the suit, where the labelled torso
   then shows its back (:func:`back_views`) the labels came from continuity alone: with frames ``all`` those
   frames are doubtful (the tracks' ``doubtful``: "ambiguous identity", in ``metrics.json``'s
   ``doubtful_ranges`` and on the overlay) and a run of 10 or more frames is a warning naming it (on 131_01's
@@ -70,7 +70,7 @@ from pydantic import ConfigDict, Field, field_validator
 
 from ...core.errors import NodeError
 from ...core.node import node, optional
-from ..io.keypoint_layouts import MEDIAPIPE_POSE, TorsoFractions
+from ..io.keypoint_layouts import MEDIAPIPE_POSE, Layout, TorsoFractions
 from ..io.mediapipe_keypoints import MediaPipeTake, tracks_from_mediapipe
 from ..io.mediapipe_world import MEDIAPIPE_TO_WORLD, motion_from_mediapipe
 from ..io.video import iter_frames
@@ -355,7 +355,7 @@ def unseen_torso_runs(suit: dict, n_frames: int, margin: int) -> tuple[list[tupl
     return [(int(r[0]), int(r[-1]) + 1) for r in runs_of(np.cumsum(wide)[:n_frames] > 0, min_len=1)], len(idx)
 
 
-def suit_landmarks(suit: dict, layout, n_frames: int) -> np.ndarray:
+def suit_landmarks(suit: dict, layout: Layout, n_frames: int) -> np.ndarray:
     """The suit tracker's points ``(n, L, 2)`` px in a detector's landmark layout: each limb joint's tracked point
     at the landmark of the same name (``left_shoulder`` ... ``right_ankle``), NaN elsewhere and where untracked;
     the reference that tells :func:`.left_right.consistent_sides` the detector's left from its right."""
@@ -484,8 +484,8 @@ def mediapipe_pose(ctx, video, suit=None):
                         hint="check the video shows a person, or lower min_detection_confidence")
     detected = ~np.isnan(raw.image).all(axis=(1, 2))
     swaps = {g: np.zeros(raw.image.shape[0], dtype=bool) for g in GROUPS}
+    use_suit = p.sides == "consistent" and suit is not None and p.sides_from_suit
     if p.sides == "consistent":
-        use_suit = suit is not None and p.sides_from_suit
         reference = suit_landmarks(suit, MEDIAPIPE_POSE, raw.image.shape[0]) if use_suit else None
         swaps = consistent_sides(raw.image[..., :2] * np.array([video.width, video.height]), detected,
                                  reference=reference)
@@ -502,7 +502,8 @@ def mediapipe_pose(ctx, video, suit=None):
     motion = motion_from_mediapipe(take, video.fps, p.threshold, p.root_height, p, where)
     if p.facing:
         tracks["facing"] = torso_facing(motion, tracks["points"])
-    if runs is None and p.sides == "consistent":  # (with 'torso_unseen' the solver takes each pair either way round)
+    # (with 'torso_unseen' the solver takes each pair either way round; with the suit's patches the labels are theirs)
+    if runs is None and p.sides == "consistent" and not use_suit:
         doubt, warning = back_view_doubt(tracks["points"], tracks["tracked"], video.start, where)
         if doubt.any():
             tracks["doubtful"] = doubt
