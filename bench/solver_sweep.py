@@ -91,7 +91,10 @@ def solve(take, params: dict, focal: str, cache: Cache, repeats: int = 1, jitter
         p["focal_px"] = float(np.asarray(truth["K"])[0, 0])
     sil = st.silhouette_field(run.output("silhouette.silhouette"), n)
     lens = None if focal == "take" else run.output("lens.lens")
-    hints = st.detector_hints(None, *st.detector_keypoints(run.output("detect.tracks"), tr))
+    detected = run.output("detect.tracks")
+    facing = detected.get("facing") if isinstance(detected, dict) else None  # as the node takes it
+    hints = st.detector_hints(None if facing is None else np.asarray(facing, dtype=np.float64),
+                              *st.detector_keypoints(detected, tr))
     out = []
     for r in range(repeats):
         points = tr.points

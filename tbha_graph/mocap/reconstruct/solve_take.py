@@ -89,7 +89,9 @@ the three solver renders and the sample 62.9 -> 60.8, the six held-out takes 119
    (Pose run only where no torso patch is seen, as default.yaml does; round 8, on every frame: 119.2 -> 101.6).
    Tracks from ``detect.mediapipe_pose`` (``pipelines/mediapipe.yaml``) carry its torso ``facing``, which the
    torso is kept near (:func:`.take_model.facing_residual`, ``sigma_facing``; MediaPipe renders' mean PA-MPJPE
-   88.1 -> 77.8 mm).
+   88.1 -> 77.8 mm); so do its keypoints beside a suit's tracks (``default.yaml``, where the suit's patches make
+   its left and right right: the 16 renders' mean 101.0 [99.6-103.4] -> 98.4 [90.9-104.7] mm, better on 10 takes,
+   worse on 2, root-relative 75.4 -> 71.6, ``bench/solver_sweep.py --repeats 5``).
 5. **World frame.** y up = the floor normal, origin on the floor below the hips on the first frame, z the
    actor's forward on the first frame made horizontal (the actor faces +z in the T-pose).
 
@@ -785,7 +787,8 @@ def silhouette_field(silhouette: dict, n_frames: int) -> SilhouetteField:
             "lens": optional(LENS, "a focal length found before (calibrate.vanishing_points): the start and a prior, "
                              "unless focal_px is given"),
             "keypoints": optional(TRACKS2D, "a detector's 2D joints on the same video (detect.mediapipe_pose): where no "
-                                  "torso patch is seen (the actor's back to the camera), each joint's keypoint (sigma_kp)")},
+                                  "torso patch is seen (the actor's back to the camera), each joint's keypoint (sigma_kp); "
+                                  "its torso facing, if it carries one and the tracks do not (sigma_facing)")},
     outputs={
         "motion": MOTION,
         "camera": CAMERA,
@@ -817,6 +820,8 @@ def solve_take(ctx, tracks, body, silhouette=None, lens=None, keypoints=None):
             raise NodeError(f"the lens estimate is for {lens.width}x{lens.height} px images, the tracks are "
                             f"{tr.width}x{tr.height}", hint="connect the lens found on the same video as the tracks")
     facing = tracks.get("facing") if isinstance(tracks, dict) else None
+    if facing is None and isinstance(keypoints, dict):  # a detector's own facing beside the suit's tracks
+        facing = keypoints.get("facing")
     if facing is not None:
         facing = np.asarray(facing, dtype=np.float64)
         if facing.shape != (tr.n_frames, 2, 3):
