@@ -527,3 +527,36 @@ def test_a_second_side_search_pass_redecides_what_the_first_left_behind(truth):
 
     one, two = error_mm(1), error_mm(2)
     assert two < 0.85 * one and two < 28.5  # measured 19.0 vs 26.9 mm
+
+
+def test_node_takes_the_torso_facing_from_its_keypoints_input_beside_a_suit(truth, monkeypatch):
+    """default.yaml gives the suit's tracks (no facing) and MediaPipe's keypoints (with its torso facing, its left
+    and right decided by the suit's patches): the node hands the keypoints' facing to the solver, and the tracks'
+    own facing when they carry one (pipelines/mediapipe.yaml)."""
+    from tbha_graph.core.testing import run_node
+    from tbha_graph.mocap.reconstruct import solve_take as st
+    from tbha_graph.mocap.reconstruct.take_model import fronts
+    from tbha_graph.mocap.skeleton import JOINT_NAMES
+
+    P, uv, centre, L = synthetic(truth, 12)
+    w, h = int(truth["width"]), int(truth["height"])
+    suit = {"points": uv, "tracked": np.ones(uv.shape[:2], bool), "fps": np.array(30.0), "width": np.array(w),
+            "height": np.array(h), "joint_names": np.array(JOINT_NAMES)}
+    facing = np.stack(fronts(P), axis=1)  # (12, 2, 3) camera axes
+    keypoints = dict(suit, points=700.0 * P[..., :2] / P[..., 2:3] + centre, facing=facing)
+    seen = []
+    real = st.solve_take_arrays
+
+    def recording(*args, **kwargs):
+        seen.append(kwargs.get("hints"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(st, "solve_take_arrays", recording)
+    params = {"focal_px": 700.0, "max_iterations": 2, "calib_iterations": 2, "side_search": False, "cross_seed": False}
+    run_node(st.solve_take, params, tracks=suit, keypoints=keypoints)
+    np.testing.assert_array_equal(seen[-1]["facing"], facing)
+    run_node(st.solve_take, params, tracks=suit)  # neither carries one: no facing term
+    assert seen[-1] is None or "facing" not in seen[-1]
+    own = -facing  # the tracks' own facing wins over the keypoints'
+    run_node(st.solve_take, params, tracks=dict(suit, facing=own), keypoints=keypoints)
+    np.testing.assert_array_equal(seen[-1]["facing"], own)
