@@ -92,8 +92,7 @@ def solve(take, params: dict, focal: str, cache: Cache, repeats: int = 1, jitter
     sil = st.silhouette_field(run.output("silhouette.silhouette"), n)
     lens = None if focal == "take" else run.output("lens.lens")
     detected = run.output("detect.tracks")
-    facing = detected.get("facing") if isinstance(detected, dict) else None  # as the node takes it
-    hints = st.detector_hints(None if facing is None else np.asarray(facing, dtype=np.float64),
+    hints = st.detector_hints(st.torso_facing_hint(run.output("track.tracks"), detected),
                               *st.detector_keypoints(detected, tr))
     out = []
     for r in range(repeats):

@@ -336,17 +336,25 @@ def detect_landmarks(ctx, video: VideoClip, p: MediaPipePoseParams,
     return MediaPipeTake(image, world, video.start, video.fps, video.width, video.height), timing
 
 
-def unseen_torso_runs(suit: dict, n_frames: int, margin: int) -> tuple[list[tuple[int, int]], int]:
-    """``[a, b)`` frame ranges where the suit's tracks (a ``TRACKS2D`` value) see no torso patch
-    (:func:`..skeleton.torso_unseen`), each widened by ``margin`` frames either side (overlaps merged), and the
-    number of frames without a torso patch."""
+def read_suit(suit: dict, n_frames: int):
+    """The suit input (a ``TRACKS2D`` value) as :class:`..bundles.tracks.Tracks2D`, checked to have the clip's
+    ``n_frames`` frames (else a NodeError naming both)."""
     from ..bundles.tracks import read_tracks
-    from ..runs import runs_of
 
     tr = read_tracks(suit)
     if tr.n_frames != n_frames:
         raise NodeError(f"the suit's tracks have {tr.n_frames} frames, the video clip {n_frames}",
                         hint="connect the tracks of the same video (suit: track.tracks)")
+    return tr
+
+
+def unseen_torso_runs(tr, margin: int) -> tuple[list[tuple[int, int]], int]:
+    """``[a, b)`` frame ranges where the suit's tracks ``tr`` (:func:`read_suit`) see no torso patch
+    (:func:`..skeleton.torso_unseen`), each widened by ``margin`` frames either side (overlaps merged), and the
+    number of frames without a torso patch."""
+    from ..runs import runs_of
+
+    n_frames = tr.n_frames
     unseen = torso_unseen(tr.tracked.astype(np.float64))
     wide = np.zeros(n_frames + 1, dtype=np.int64)  # +1 at each start - margin, -1 past each end + margin
     idx = np.flatnonzero(unseen)
@@ -355,16 +363,11 @@ def unseen_torso_runs(suit: dict, n_frames: int, margin: int) -> tuple[list[tupl
     return [(int(r[0]), int(r[-1]) + 1) for r in runs_of(np.cumsum(wide)[:n_frames] > 0, min_len=1)], len(idx)
 
 
-def suit_landmarks(suit: dict, layout: Layout, n_frames: int) -> np.ndarray:
-    """The suit tracker's points ``(n, L, 2)`` px in a detector's landmark layout: each limb joint's tracked point
-    at the landmark of the same name (``left_shoulder`` ... ``right_ankle``), NaN elsewhere and where untracked;
-    the reference that tells :func:`.left_right.consistent_sides` the detector's left from its right."""
-    from ..bundles.tracks import read_tracks
-
-    tr = read_tracks(suit)
-    if tr.n_frames != n_frames:
-        raise NodeError(f"the suit's tracks have {tr.n_frames} frames, the video clip {n_frames}",
-                        hint="connect the tracks of the same video (suit: track.tracks)")
+def suit_landmarks(tr, layout: Layout) -> np.ndarray:
+    """The suit tracker's points (``tr``, :func:`read_suit`) ``(n, L, 2)`` px in a detector's landmark layout: each
+    limb joint's tracked point at the landmark of the same name (``left_shoulder`` ... ``right_ankle``), NaN
+    elsewhere and where untracked; the reference that tells :func:`.left_right.consistent_sides` the detector's
+    left from its right."""
     out = np.full((tr.n_frames, layout.size, 2), np.nan)
     for j, name in enumerate(JOINT_NAMES):
         if name.startswith(("left_", "right_")) and name in layout.landmarks:
@@ -450,11 +453,14 @@ def mediapipe_pose(ctx, video, suit=None):
         video = VideoClip.model_validate(video)
     where = f"MediaPipe Pose on {video.path}"
     runs, unseen = None, 0
+    use_suit = p.sides == "consistent" and suit is not None and p.sides_from_suit  # its patches decide left/right
+    needed = suit is not None and p.frames != "none" and (use_suit or p.frames == "torso_unseen")
+    suit_tracks = read_suit(suit, video.n_frames) if needed else None  # read once, for both uses
     if p.frames == "torso_unseen":
-        if suit is None:
+        if suit_tracks is None:
             raise NodeError("frames 'torso_unseen' needs the suit tracker's tracks",
                             hint="connect the input suit: track.tracks, or set frames: all")
-        runs, unseen = unseen_torso_runs(suit, video.n_frames, p.margin)
+        runs, unseen = unseen_torso_runs(suit_tracks, p.margin)
     ran = video.n_frames if runs is None else sum(b - a for a, b in runs)
 
     def empty(why: str) -> dict:
@@ -484,9 +490,8 @@ def mediapipe_pose(ctx, video, suit=None):
                         hint="check the video shows a person, or lower min_detection_confidence")
     detected = ~np.isnan(raw.image).all(axis=(1, 2))
     swaps = {g: np.zeros(raw.image.shape[0], dtype=bool) for g in GROUPS}
-    use_suit = p.sides == "consistent" and suit is not None and p.sides_from_suit
     if p.sides == "consistent":
-        reference = suit_landmarks(suit, MEDIAPIPE_POSE, raw.image.shape[0]) if use_suit else None
+        reference = suit_landmarks(suit_tracks, MEDIAPIPE_POSE) if use_suit else None
         swaps = consistent_sides(raw.image[..., :2] * np.array([video.width, video.height]), detected,
                                  reference=reference)
     take = MediaPipeTake(apply_sides(raw.image, swaps), apply_sides(raw.world, swaps), raw.first_frame, raw.fps,

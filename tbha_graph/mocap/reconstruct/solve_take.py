@@ -392,6 +392,16 @@ def detector_keypoints(keypoints: dict, tr) -> tuple[np.ndarray, np.ndarray]:
     return kt.points, kt.tracked * conf
 
 
+def torso_facing_hint(tracks: dict, keypoints: dict | None = None) -> np.ndarray | None:
+    """The torso facing ``(n, 2, 3)`` the solver keeps near (:class:`.take_model.TakeData` ``facing``): the tracks'
+    own (a detector's tracks, ``pipelines/mediapipe.yaml``), else the keypoints input's (a detector beside a suit's
+    tracks, ``default.yaml``), else None."""
+    facing = tracks.get("facing") if isinstance(tracks, dict) else None
+    if facing is None and isinstance(keypoints, dict):
+        facing = keypoints.get("facing")
+    return None if facing is None else np.asarray(facing, dtype=np.float64)
+
+
 def hints_on(hints: dict | None, rows) -> dict | None:
     """The detector ``hints`` on the frames ``rows``."""
     return None if hints is None else {k: v[rows] for k, v in hints.items()}
@@ -819,11 +829,8 @@ def solve_take(ctx, tracks, body, silhouette=None, lens=None, keypoints=None):
         if (lens.width, lens.height) != (tr.width, tr.height):
             raise NodeError(f"the lens estimate is for {lens.width}x{lens.height} px images, the tracks are "
                             f"{tr.width}x{tr.height}", hint="connect the lens found on the same video as the tracks")
-    facing = tracks.get("facing") if isinstance(tracks, dict) else None
-    if facing is None and isinstance(keypoints, dict):  # a detector's own facing beside the suit's tracks
-        facing = keypoints.get("facing")
+    facing = torso_facing_hint(tracks, keypoints)
     if facing is not None:
-        facing = np.asarray(facing, dtype=np.float64)
         if facing.shape != (tr.n_frames, 2, 3):
             raise NodeError(f"the tracks' facing has shape {facing.shape}, expected ({tr.n_frames}, 2, 3)",
                             hint="facing: per frame the thorax's and the pelvis's front, camera axes")

@@ -393,7 +393,7 @@ def global_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: dict
     Js = np.zeros((n, 2, G))
     Jp = []
     # focal: the image scales about the centre
-    Jf[:, : 2 * N_JOINTS, 0] = parts["dlogf"].reshape(n, -1)
+    Jf[:, prob.blocks["reprojection"], 0] = parts["dlogf"].reshape(n, -1)
     if "sil_dlogf" in parts:  # the silhouette's points scale about the centre too; the support moves with the floor
         sil = prob.blocks["silhouette"].start
         Jf[:, sil:sil + len(SIL_PAIRS), 0] = parts["sil_dlogf"]
@@ -407,9 +407,8 @@ def global_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: dict
     below = (h < 0.0) / w.sigma_floor
     above = (d.contact & (h > w.contact_band)) / w.sigma_floor
     dh = np.concatenate([P[:, ANKLES] @ f1, np.ones((n, 2, 1))], axis=-1)  # (n, 2, 3): d h / d (g1, g2, d)
-    row = 2 * N_JOINTS + len(TORSO_PAIRS) + len(HINGES)
-    Jf[:, row:row + 2, 1:4] = below[..., None] * dh
-    Jf[:, row + 2:row + 4, 1:4] = above[..., None] * dh
+    Jf[:, prob.blocks["below_floor"], 1:4] = below[..., None] * dh
+    Jf[:, prob.blocks["contact"], 1:4] = above[..., None] * dh
     if d.silhouette is not None:
         low = np.argmin(h, axis=1)
         act = (np.min(h, axis=1) > w.support_band) / w.sigma_support
