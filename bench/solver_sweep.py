@@ -71,6 +71,23 @@ def take_graph(take, keypoints: bool = True, node_sets: dict | None = None):
     return load_graph(ROOT / "pipelines" / "evaluate_render.yaml", sets=sets, vars=vars, decl=decl), "render.ground_truth"
 
 
+def solver_inputs(take, cache: Cache, keypoints: bool = True, node_sets: dict | None = None):
+    """What the default pipeline hands its ``reconstruct`` node on ``take`` (:func:`take_graph`; its nodes from
+    ``cache``, run where missing): ``(tracks, truth, silhouette field, lens, hints)`` — the suit's tracks
+    (``read_tracks``), the render's ground truth (``GROUND_TRUTH`` port value), the actor's silhouette
+    (:func:`.solve_take.silhouette_field`), the room's ``LensEstimate`` and the detector's hints
+    (:func:`.solve_take.detector_hints`: MediaPipe's torso facing and keypoints, as the node builds them)."""
+    graph, truth_ref = take_graph(take, keypoints, node_sets)
+    run = run_graph(graph, outputs=["track", "silhouette", "lens", "detect", truth_ref.split(".")[0]],
+                    cache=cache)
+    tr = read_tracks(run.output("track.tracks"))
+    sil = st.silhouette_field(run.output("silhouette.silhouette"), tr.n_frames)
+    detected = run.output("detect.tracks")
+    hints = st.detector_hints(st.torso_facing_hint(run.output("track.tracks"), detected),
+                              *st.detector_keypoints(detected, tr))
+    return tr, run.output(truth_ref), sil, run.output("lens.lens"), hints
+
+
 def solve(take, params: dict, focal: str, cache: Cache, repeats: int = 1, jitter_px: float = 0.05,
           keypoints: bool = True, node_sets: dict | None = None) -> list[dict]:
     """Scores of the solver on ``take`` with ``SolveTakeParams(**params)``, one dict per repeat: ``seq`` (seq-MPJPE,
@@ -79,21 +96,13 @@ def solve(take, params: dict, focal: str, cache: Cache, repeats: int = 1, jitter
     the tracks as they are, repeat r >= 1 on the tracked points plus Gaussian noise of ``jitter_px`` pixels, seed
     r); ``focal``: ``room`` (the ``lens`` node's estimate, as the default pipeline), ``given`` (the truth's) or
     ``take`` (no lens); ``keypoints``: with MediaPipe's keypoints where no torso patch is seen, as the default pipeline."""
-    graph, truth_ref = take_graph(take, keypoints, node_sets)
-    run = run_graph(graph, outputs=["track", "silhouette", "lens", "detect", truth_ref.split(".")[0]],
-                    cache=cache)
-    truth = run.output(truth_ref)
-    tr = read_tracks(run.output("track.tracks"))
+    tr, truth, sil, lens, hints = solver_inputs(take, cache, keypoints, node_sets)
     n = tr.n_frames
     gt = np.asarray(truth["joints3d_world"])[:n]
     p = dict(params)
     if focal == "given":
         p["focal_px"] = float(np.asarray(truth["K"])[0, 0])
-    sil = st.silhouette_field(run.output("silhouette.silhouette"), n)
-    lens = None if focal == "take" else run.output("lens.lens")
-    detected = run.output("detect.tracks")
-    hints = st.detector_hints(st.torso_facing_hint(run.output("track.tracks"), detected),
-                              *st.detector_keypoints(detected, tr))
+    lens = None if focal == "take" else lens
     out = []
     for r in range(repeats):
         points = tr.points

@@ -590,19 +590,32 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
         return _solve_take(points, tracked, lengths, width, height, fps, p, progress, confidence, silhouette, lens, hints)
 
 
-def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams, progress, confidence, sil,
-                lens=None, hints=None) -> dict:
+def take_inputs(points: np.ndarray, tracked: np.ndarray, fps: float, p: SolveTakeParams,
+                confidence: np.ndarray | None = None, hints: dict | None = None) -> tuple[np.ndarray, dict | None]:
+    """What every solve of a take weighs, from its tracked ``points`` ``(n, 16, 2)`` pixels and ``tracked``
+    ``(n, 16)``: the points' weights ``(n, 16)`` (1 where tracked, times ``confidence`` ``(n, 16)`` to the power
+    ``p.confidence_power`` when given) and the per-frame ``hints`` as the problem takes them (:func:`detector_hints`'
+    keypoints kept only on frames where no torso patch is seen; the opening T-pose's frames, ``tpose`` ``(n,)`` bool,
+    added when ``p.sigma_tpose`` is set and :func:`..tpose.find_tpose` finds them; None when there is nothing)."""
     if hints is not None and "keypoints" in hints:  # a detector's keypoints only where no torso patch is seen
         hints = {**hints, "kp_weight": hints["kp_weight"] * torso_unseen(tracked.astype(np.float64))[:, None]}
         if not hints["kp_weight"].any():  # none left: the problem is the one without keypoints
             hints = {k: v for k, v in hints.items() if k not in ("keypoints", "kp_weight")} or None
-
     if p.sigma_tpose is not None:  # the opening T-pose's frames: a per-frame prior carried like a detector's data
         found = find_tpose(points, tracked, fps, max_untracked=1, level=TPOSE_PRIOR_LEVEL)  # one patch may be lost
         if found is not None:
             tpose = np.zeros(points.shape[0], dtype=bool)
             tpose[found[0]:found[1] + 1] = True
             hints = {**(hints or {}), "tpose": tpose}
+    weight = tracked.astype(np.float64)
+    if p.confidence_power > 0 and confidence is not None:
+        weight = weight * np.clip(np.nan_to_num(np.asarray(confidence, dtype=np.float64)), 0.0, 1.0) ** p.confidence_power
+    return weight, hints
+
+
+def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams, progress, confidence, sil,
+                lens=None, hints=None) -> dict:
+    weight, hints = take_inputs(points, tracked, fps, p, confidence, hints)
 
     def hint(rows, tpose: bool = True):  # the detector's data on these frames (None without); without the T-pose's
         # frames where the focal length is chosen (held out sideways, arms of the wrong length move the focal instead)
@@ -612,9 +625,6 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
     floor_prior = None
     n = points.shape[0]
     centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
-    weight = tracked.astype(np.float64)
-    if p.confidence_power > 0 and confidence is not None:
-        weight = weight * np.clip(np.nan_to_num(np.asarray(confidence, dtype=np.float64)), 0.0, 1.0) ** p.confidence_power
     report: dict = {"frames": n}
     if hints is not None and "kp_weight" in hints:  # frames placed by a detector's keypoints (no torso patch seen)
         report["keypoint_frames"] = int((hints["kp_weight"] > 0).any(axis=1).sum())
