@@ -44,7 +44,7 @@ def take_name(take) -> str:
 
 def landscape(take, cache: Cache, iterations: int) -> dict:
     """The four figures of one take (module docstring) and the node's own error, mm."""
-    tr, truth, sil, _lens, hints = solver_inputs(take, cache)
+    tr, truth, sil, _lens, hints, pose3d = solver_inputs(take, cache)
     n = tr.n_frames
     K, R, t = (np.asarray(truth[k], dtype=np.float64) for k in ("K", "R", "t"))
     t = t.ravel()
@@ -53,7 +53,7 @@ def landscape(take, cache: Cache, iterations: int) -> dict:
     lengths = body_lengths(None)
     gt = np.asarray(truth["joints3d_world"], dtype=np.float64)[:n]
     res = st.solve_take_arrays(tr.points, tr.tracked, lengths, tr.width, tr.height, float(tr.fps), p,
-                               silhouette=sil, hints=hints)  # no confidence: suit tracks carry none
+                               silhouette=sil, hints=hints, pose3d=pose3d)  # no confidence: suit tracks carry none
     aligned, _ = align_clip(res["joints"], gt, mode="rigid")
     out = {"node_mm": float(np.linalg.norm(aligned - gt, axis=-1).mean() * 1000.0)}
     camera = Camera(K=K, R=R, t=t, width=tr.width, height=tr.height)

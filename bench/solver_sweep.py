@@ -27,6 +27,7 @@ setting is better than another when its mean is, by more than their spreads.
     python bench/solver_sweep.py --focal take                     # no room lines: the focal length from the take
     python bench/solver_sweep.py --repeats 3                      # each take 3 times (twice with 0.05 px noise)
     python bench/solver_sweep.py --no-keypoints                   # without MediaPipe's keypoints (default.yaml's detect off)
+    python bench/solver_sweep.py --no-pose3d                      # without MediaPipe's 3D limbs as a second start
     python bench/solver_sweep.py --node-set detect.threshold=0.3  # another node's param (here MediaPipe's visibility threshold)
 """
 from __future__ import annotations
@@ -85,18 +86,20 @@ def solver_inputs(take, cache: Cache, keypoints: bool = True, node_sets: dict | 
     detected = run.output("detect.tracks")
     hints = st.detector_hints(st.torso_facing_hint(run.output("track.tracks"), detected),
                               *st.detector_keypoints(detected, tr))
-    return tr, run.output(truth_ref), sil, run.output("lens.lens"), hints
+    pose3d = st.detector_pose3d(run.output("detect.motion"), tr.n_frames)
+    return tr, run.output(truth_ref), sil, run.output("lens.lens"), hints, pose3d
 
 
 def solve(take, params: dict, focal: str, cache: Cache, repeats: int = 1, jitter_px: float = 0.05,
-          keypoints: bool = True, node_sets: dict | None = None) -> list[dict]:
+          keypoints: bool = True, node_sets: dict | None = None, use_pose3d: bool = True) -> list[dict]:
     """Scores of the solver on ``take`` with ``SolveTakeParams(**params)``, one dict per repeat: ``seq`` (seq-MPJPE,
     mm), ``rootrel`` (root-relative after the same alignment, mm), ``tpose`` (the T-pose frames aligned on their
     own, mm; NaN when the solver finds none) and ``ms`` (the solve's wall time per frame). The first repeat is on
     the tracks as they are, repeat r >= 1 on the tracked points plus Gaussian noise of ``jitter_px`` pixels, seed
     r); ``focal``: ``room`` (the ``lens`` node's estimate, as the default pipeline), ``given`` (the truth's) or
-    ``take`` (no lens); ``keypoints``: with MediaPipe's keypoints where no torso patch is seen, as the default pipeline."""
-    tr, truth, sil, lens, hints = solver_inputs(take, cache, keypoints, node_sets)
+    ``take`` (no lens); ``keypoints``: with MediaPipe's keypoints where no torso patch is seen, as the default pipeline;
+    ``use_pose3d``: with its own 3D limbs there as a second start of the final solve (``pose3d``), as the default pipeline."""
+    tr, truth, sil, lens, hints, pose3d = solver_inputs(take, cache, keypoints, node_sets)
     n = tr.n_frames
     gt = np.asarray(truth["joints3d_world"])[:n]
     p = dict(params)
@@ -110,7 +113,8 @@ def solve(take, params: dict, focal: str, cache: Cache, repeats: int = 1, jitter
             points = points + np.random.default_rng(r).normal(0.0, jitter_px, points.shape)
         t0 = time.perf_counter()
         res = st.solve_take_arrays(points, tr.tracked, body_lengths(None), tr.width, tr.height, float(tr.fps),
-                                   st.SolveTakeParams(**p), silhouette=sil, lens=lens, hints=hints)
+                                   st.SolveTakeParams(**p), silhouette=sil, lens=lens, hints=hints,
+                                   pose3d=pose3d if use_pose3d else None)
         ms = 1000.0 * (time.perf_counter() - t0) / n
         aligned, _ = align_clip(res["joints"], gt, mode="rigid")
         err = np.linalg.norm(aligned - gt, axis=-1)
@@ -134,6 +138,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--focal", choices=("room", "given", "take"), default="room")
     ap.add_argument("--repeats", type=int, default=1, help="solves per take: the tracks as they are, then with noise")
     ap.add_argument("--jitter-px", type=float, default=0.05, help="sd of the noise added to the tracks in repeats 2..K, pixels")
+    ap.add_argument("--no-pose3d", dest="pose3d", action="store_false", help="without MediaPipe's own 3D limbs as a second "
+                    "start where no torso patch is seen (default.yaml's reconstruct input pose3d)")
     ap.add_argument("--no-keypoints", dest="keypoints", action="store_false", help="without MediaPipe's keypoints where no "
                     "torso patch is seen (default.yaml's node detect off; with them Pose runs once per take, then cached)")
     args = ap.parse_args(argv)
@@ -159,7 +165,7 @@ def main(argv: list[str] | None = None) -> None:
     scores: dict[str, list[dict]] = {}
     for take in ["sample"] + [t[0] for t in SOLVER_TAKES] + TURNING:
         name = take if isinstance(take, str) else f"{take[0]}_{take[1]}"
-        scores[name] = solve(take, params, args.focal, cache, args.repeats, args.jitter_px, args.keypoints, node_sets)
+        scores[name] = solve(take, params, args.focal, cache, args.repeats, args.jitter_px, args.keypoints, node_sets, args.pose3d)
         seq = [s["seq"] for s in scores[name]]
         print(f"{name}_mpjpe_mm={np.mean(seq):.1f}", flush=True)
         if args.repeats > 1:

@@ -560,3 +560,84 @@ def test_node_takes_the_torso_facing_from_its_keypoints_input_beside_a_suit(trut
     own = -facing  # the tracks' own facing wins over the keypoints'
     run_node(st.solve_take, params, tracks=dict(suit, facing=own), keypoints=keypoints)
     np.testing.assert_array_equal(seen[-1]["facing"], own)
+
+
+def test_limbs_from_pose_takes_the_limbs_directions_of_a_3d_pose_in_any_frame(truth):
+    """A detector's 3D pose, turned, shifted and scaled (MediaPipe's world landmarks are hips-centred, in their own
+    axes and scale): on the chosen frames the limbs and head follow its bone directions at the solve's bone lengths,
+    the torso and root stay, other frames and frames without a pose (NaN) are untouched."""
+    from tbha_graph.mocap.reconstruct.solve_take import limbs_from_pose
+    from tbha_graph.mocap.reconstruct.take_solver import SIDE_GROUPS, mirror
+    from tbha_graph.mocap.skeleton import TORSO_JOINTS
+
+    P, _, _, L = synthetic(truth, 30)
+    wrong = P.copy()
+    for g in SIDE_GROUPS[2:]:  # every limb and the head on its other depth side
+        wrong = mirror(wrong, np.arange(30), g, L)
+    assert np.abs(wrong - P).max() > 0.05
+    c, s = np.cos(0.7), np.sin(0.7)
+    pose = 0.8 * P @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]).T + np.array([1.0, -2.0, 3.0])
+    pose[25:] = np.nan  # the detector saw nothing there
+    frames = np.zeros(30, bool)
+    frames[5:28] = True
+    out = limbs_from_pose(wrong, pose, frames, L)
+    np.testing.assert_allclose(out[5:25], P[5:25], atol=1e-9)  # the truth's limbs back, at their lengths
+    np.testing.assert_array_equal(out[:5], wrong[:5])
+    np.testing.assert_array_equal(out[25:], wrong[25:])
+    np.testing.assert_array_equal(out[:, TORSO_JOINTS], wrong[:, TORSO_JOINTS])
+
+
+def test_the_detectors_3d_pose_is_a_second_start_and_the_cheaper_solve_is_kept(truth):
+    """Where no torso patch is seen, the final pose solve runs again from the detector's 3D limbs and keeps whichever
+    ends cheaper: a pose with the truth's limbs wins over a solve left on wrong depth sides (no side search, focal
+    length from the take), a pose with nonsense limbs loses and leaves the answer exactly as without it."""
+    from tbha_graph.mocap.reconstruct import solve_take as st
+    from tbha_graph.mocap.skeleton import TORSO_JOINTS
+
+    P, uv, _, L = synthetic(truth, 120, start=0)
+    tracked = np.ones(uv.shape[:2], bool)
+    tracked[60:100][:, TORSO_JOINTS] = False  # the torso's patches unseen, as with the actor's back turned
+    p = st.SolveTakeParams(side_search=False)
+
+    def solve(pose3d=None):
+        return st.solve_take_arrays(uv, tracked, L, int(truth["width"]), int(truth["height"]), 30.0, p, pose3d=pose3d)
+
+    alone = solve()
+    assert "pose3d_start_kept" not in alone["report"]
+    good = solve(0.8 * P + 1.0)["report"]
+    assert good["pose3d_start_frames"] == 40
+    assert good["pose3d_start_kept"] and good["pose_cost_pose3d"] < 0.7 * good["pose_cost"]  # measured 156.1 against 275.0
+    bad = solve(np.random.default_rng(0).normal(0.0, 1.0, P.shape))
+    assert not bad["report"]["pose3d_start_kept"] and bad["report"]["pose_cost_pose3d"] > bad["report"]["pose_cost"]
+    np.testing.assert_array_equal(bad["joints"], alone["joints"])
+
+
+def test_node_hands_the_detectors_3d_pose_to_the_solver_where_it_saw_someone(truth, monkeypatch):
+    """default.yaml connects detect.motion (MediaPipe's world landmarks) to the node's pose3d input: the solver gets
+    its joints, NaN on the frames where the detector tracked nothing; joints of another take's length are an error
+    naming the input."""
+    from tbha_graph.core.errors import NodeError
+    from tbha_graph.core.testing import run_node
+    from tbha_graph.mocap.reconstruct import solve_take as st
+    from tbha_graph.mocap.skeleton import JOINT_NAMES
+
+    P, uv, _, _ = synthetic(truth, 12)
+    suit = {"points": uv, "tracked": np.ones(uv.shape[:2], bool), "fps": np.array(30.0), "width": np.array(int(truth["width"])),
+            "height": np.array(int(truth["height"])), "joint_names": np.array(JOINT_NAMES)}
+    seen_by_detector = np.ones((12, 16), bool)
+    seen_by_detector[4:6] = False
+    motion = {"joints": P.copy(), "tracked": seen_by_detector, "fps": np.array(30.0), "joint_names": np.array(JOINT_NAMES)}
+    got = []
+    real = st.solve_take_arrays
+
+    def recording(*args, **kwargs):
+        got.append(kwargs.get("pose3d"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(st, "solve_take_arrays", recording)
+    params = {"focal_px": 700.0, "max_iterations": 2, "calib_iterations": 2, "side_search": False, "cross_seed": False}
+    run_node(st.solve_take, params, tracks=suit, pose3d=motion)
+    assert np.isnan(got[-1][4:6]).all()
+    np.testing.assert_array_equal(np.delete(got[-1], [4, 5], axis=0), np.delete(P, [4, 5], axis=0))
+    with pytest.raises(NodeError, match="pose3d"):
+        run_node(st.solve_take, params, tracks=suit, pose3d=dict(motion, joints=P[:10], tracked=seen_by_detector[:10]))

@@ -402,6 +402,17 @@ def torso_facing_hint(tracks: dict, keypoints: dict | None = None) -> np.ndarray
     return None if facing is None else np.asarray(facing, dtype=np.float64)
 
 
+def detector_pose3d(motion: dict, n_frames: int) -> np.ndarray:
+    """A detector's own 3D joints ``(n_frames, 16, 3)`` from its ``MOTION`` port value (``detect.mediapipe_pose``'s
+    ``motion``), NaN on the frames where it tracked no joint (it did not run there or saw no one)."""
+    joints = np.asarray(motion["joints"], dtype=np.float64)
+    if joints.shape != (n_frames, N_JOINTS, 3):
+        raise NodeError(f"the pose3d input's joints have shape {joints.shape}, expected ({n_frames}, {N_JOINTS}, 3)",
+                        hint="connect the 3D motion found on the same video as the tracks (detect.motion)")
+    found = np.asarray(motion.get("tracked", np.ones(joints.shape[:2], dtype=bool)), dtype=bool).any(axis=1)
+    return np.where(found[:, None, None], joints, np.nan)
+
+
 def hints_on(hints: dict | None, rows) -> dict | None:
     """The detector ``hints`` on the frames ``rows``."""
     return None if hints is None else {k: v[rows] for k, v in hints.items()}
@@ -570,14 +581,18 @@ def world_frame(P: np.ndarray, nf: np.ndarray, d: float) -> tuple[np.ndarray, np
 def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarray, width: int, height: int,
                       fps: float, p: SolveTakeParams, progress=None, confidence: np.ndarray | None = None,
                       silhouette: SilhouetteField | None = None, lens: LensEstimate | None = None,
-                      hints: dict | None = None) -> dict:
+                      hints: dict | None = None, pose3d: np.ndarray | None = None) -> dict:
     """The whole solve (see the module docstring) on 2D points ``(n, 16, 2)`` px; ``progress`` (optional, as
     ``ctx.progress``: wraps an iterable) shows the starts and the pose windows; ``silhouette`` (optional) the
     actor's outline on every frame; ``lens`` (optional) a focal length found before (``calibrate.vanishing_points``;
     ignored when it holds none): without ``p.focal_px`` the solve starts there and keeps it as a prior (its sd and
     :data:`LENS_SD_FLOOR` combined), and the floor's normal found with it (``up_cam``) as a prior too (sd at least
     :data:`FLOOR_SD_FLOOR_DEG`); ``hints`` (optional, :func:`detector_hints`) a detector's per-frame data: the thorax's
-    and the pelvis's fronts (``sigma_facing``) and its keypoints where the suit's points are lost (``sigma_kp``). Returns a dict with
+    and the pelvis's fronts (``sigma_facing``) and its keypoints where the suit's points are lost (``sigma_kp``); ``pose3d``
+    ``(n, 16, 3)`` (optional; NaN rows where absent) a detector's own 3D joints, any frame and scale: on the frames
+    where no torso patch is seen, the final pose solve is run a second time from its limbs' directions
+    (:func:`limbs_from_pose`) and the cheaper solve kept (``report["pose3d_start_kept"]``; takes solved whole, up to
+    ``window_frames``; a longer take's windows do not use it). Returns a dict with
     ``joints`` (n, 16, 3) world metres, ``camera`` (:class:`Camera`), ``sides`` (n, 16) int8, ``report``.
 
     BLAS runs on one thread meanwhile: the solver's matrices are small (33 x 33 frame blocks, a band of 99),
@@ -587,7 +602,8 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(limits=1, user_api="blas"):
-        return _solve_take(points, tracked, lengths, width, height, fps, p, progress, confidence, silhouette, lens, hints)
+        return _solve_take(points, tracked, lengths, width, height, fps, p, progress, confidence, silhouette, lens, hints,
+                           pose3d)
 
 
 def take_inputs(points: np.ndarray, tracked: np.ndarray, fps: float, p: SolveTakeParams,
@@ -613,8 +629,30 @@ def take_inputs(points: np.ndarray, tracked: np.ndarray, fps: float, p: SolveTak
     return weight, hints
 
 
+def limbs_from_pose(P: np.ndarray, pose: np.ndarray, frames: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """``P`` ``(n, 16, 3)`` (camera frame, metres) with the limbs and head on ``frames`` ``(n,)`` bool re-placed along
+    the bone directions of a detector's own 3D ``pose`` ``(n, 16, 3)`` (any frame and scale, e.g. MediaPipe's world
+    landmarks), each frame's ``pose`` turned onto ``P``'s torso first (:func:`..rigid.procrustes` over the torso
+    joints); the root and torso stay, every bone keeps its length ``lengths`` ``(16,)``."""
+    from ..rigid import procrustes
+
+    out = P.copy()
+    rows = np.flatnonzero(frames & np.isfinite(pose).all(axis=(1, 2)))
+    if rows.size == 0:
+        return out
+    _, R, t = procrustes(pose[rows][:, TORSO_JOINTS], P[rows][:, TORSO_JOINTS])
+    Q = np.einsum("nij,nkj->nki", R, pose[rows]) + t[:, None]
+    for j in range(1, N_JOINTS):  # parents first
+        if j in TORSO_JOINTS:
+            continue
+        u = Q[:, j] - Q[:, PARENTS[j]]
+        u = u / np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-9)
+        out[rows, j] = out[rows, PARENTS[j]] + lengths[j] * u
+    return out
+
+
 def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams, progress, confidence, sil,
-                lens=None, hints=None) -> dict:
+                lens=None, hints=None, pose3d=None) -> dict:
     weight, hints = take_inputs(points, tracked, fps, p, confidence, hints)
 
     def hint(rows, tpose: bool = True):  # the detector's data on these frames (None without); without the T-pose's
@@ -729,6 +767,20 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
                                                 p.max_iterations, (f_sel, 1e-4), p.side_search, contact,
                                                 tol=POSE_TOL, silhouette=sil, floor_prior=floor_prior, hints=hint(slice(None)),
                                                 side_passes=p.side_search_passes)
+        # a second start: the detector's own 3D limbs where no torso patch is seen (the back turned: the solve's own
+        # answer there is often a dearer basin than one near the truth, bench/solver_landscape.py), the cheaper kept
+        second_rows = None if pose3d is None else torso_unseen(weight) & np.isfinite(pose3d).all(axis=(1, 2))
+        if second_rows is not None and second_rows.any():
+            P_2 = limbs_from_pose(prob.solution(x)[4], np.asarray(pose3d, dtype=np.float64), second_rows, lengths)
+            f_2, nf_2, d_2, _, _ = prob.solution(x)
+            g_2 = np.concatenate([[np.log(f_2), 0.0, 0.0, d_2], prob.globals_of(x)[4:]])
+            second = solve_frames(points, weight, lengths, centre, fps, P_2, (nf_2, d_2), g_2, p, p.max_iterations,
+                                  (f_2, 1e-4), p.side_search, contact, tol=POSE_TOL, silhouette=sil,
+                                  floor_prior=floor_prior, hints=hint(slice(None)), side_passes=p.side_search_passes)
+            report.update(pose3d_start_frames=int(second_rows.sum()), pose3d_start_kept=bool(second[2] < cost),
+                          pose_cost=round(float(cost), 1), pose_cost_pose3d=round(float(second[2]), 1))
+            if second[2] < cost:
+                prob, x, cost, ne, kept2 = second
     elif not whole:  # the same in windows, camera and floor held
         f_sel, nf_s, d_s, _, P_s = prob.solution(x)
         g_s = np.concatenate([[np.log(f_sel), 0.0, 0.0, d_s], prob.globals_of(x)[4:]])
@@ -808,7 +860,10 @@ def silhouette_field(silhouette: dict, n_frames: int) -> SilhouetteField:
                              "unless focal_px is given"),
             "keypoints": optional(TRACKS2D, "a detector's 2D joints on the same video (detect.mediapipe_pose): where no "
                                   "torso patch is seen (the actor's back to the camera), each joint's keypoint (sigma_kp); "
-                                  "its torso facing, if it carries one and the tracks do not (sigma_facing)")},
+                                  "its torso facing, if it carries one and the tracks do not (sigma_facing)"),
+            "pose3d": optional(MOTION, "a detector's own 3D joints on the same video (detect.mediapipe_pose's motion: "
+                               "MediaPipe's world landmarks): where no torso patch is seen, a second start of the final "
+                               "pose solve takes its limbs' directions, and the cheaper of the two solves is kept")},
     outputs={
         "motion": MOTION,
         "camera": CAMERA,
@@ -817,7 +872,7 @@ def silhouette_field(silhouette: dict, n_frames: int) -> SilhouetteField:
     },
     params=SolveTakeParams,
 )
-def solve_take(ctx, tracks, body, silhouette=None, lens=None, keypoints=None):
+def solve_take(ctx, tracks, body, silhouette=None, lens=None, keypoints=None, pose3d=None):
     """Camera (focal, pose above the floor) and motion estimated together from the whole take's 2D tracks."""
     p: SolveTakeParams = ctx.params
     tr = read_tracks(tracks)
@@ -851,10 +906,14 @@ def solve_take(ctx, tracks, body, silhouette=None, lens=None, keypoints=None):
         kp, kp_weight = detector_keypoints(keypoints, tr)
         ctx.log(f"detector keypoints on {100 * torso_unseen(tr.tracked.astype(float)).mean():.0f} % of frames "
                 "(no torso patch seen)")
+    limbs3d = None if pose3d is None else detector_pose3d(pose3d, tr.n_frames)
+    if limbs3d is not None:
+        ctx.log(f"detector 3D pose on {100 * np.isfinite(limbs3d).all(axis=(1, 2)).mean():.0f} % of frames (a second "
+                "start where no torso patch is seen)")
     t0 = time.perf_counter()
     out = solve_take_arrays(tr.points, tr.tracked, lengths, tr.width, tr.height, float(tr.fps), p,
                             progress=ctx.progress, confidence=confidence, silhouette=sil, lens=lens,
-                            hints=detector_hints(facing, kp, kp_weight))
+                            hints=detector_hints(facing, kp, kp_weight), pose3d=limbs3d)
     rep = out["report"]  # no timing in it: it is hashed into the keys of the nodes it feeds (evaluate.metrics)
     ctx.log(f"focal {rep['focal_px']:.0f} px (± {rep['focal_sd_pct']:.1f} %), camera {rep['camera_height_m']:.2f} m high, "
             f"{rep['camera_distance_m']:.2f} m away, tilt {rep['camera_tilt_deg']:.1f}°; {time.perf_counter() - t0:.1f} s")
