@@ -42,6 +42,34 @@ def synthetic(truth, n: int, f: float = 700.0, start: int = 60):
     return P, f * Q[..., :2] / Q[..., 2:3] + centre, centre, L
 
 
+#: The node's params for tests of what it hands the solver (a few iterations, no search: the wiring, not the answer)
+QUICK_NODE_PARAMS = {"focal_px": 700.0, "max_iterations": 2, "calib_iterations": 2, "side_search": False, "cross_seed": False}
+
+
+def suit_tracks(truth, uv) -> dict:
+    """A ``TRACKS2D`` port value of the 2D points ``uv`` ``(n, 16, 2)``, every point tracked, at the sample's size."""
+    from tbha_graph.mocap.skeleton import JOINT_NAMES
+
+    return {"points": uv, "tracked": np.ones(uv.shape[:2], bool), "fps": np.array(30.0),
+            "width": np.array(int(truth["width"])), "height": np.array(int(truth["height"])),
+            "joint_names": np.array(JOINT_NAMES)}
+
+
+def solver_calls(monkeypatch, keyword: str) -> list:
+    """The values of ``keyword`` that ``solve_take_arrays`` is called with from now on (appended per call; the
+    solver still runs)."""
+    from tbha_graph.mocap.reconstruct import solve_take as st
+
+    seen, real = [], st.solve_take_arrays
+
+    def recording(*args, **kwargs):
+        seen.append(kwargs.get(keyword))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(st, "solve_take_arrays", recording)
+    return seen
+
+
 def problem(truth, P, uv, centre, L, weights: Weights, free_offsets=False, focal_prior=None, free_lengths=False,
             silhouette=None, **hints):
     R = truth["R"]
@@ -536,23 +564,13 @@ def test_node_takes_the_torso_facing_from_its_keypoints_input_beside_a_suit(trut
     from tbha_graph.core.testing import run_node
     from tbha_graph.mocap.reconstruct import solve_take as st
     from tbha_graph.mocap.reconstruct.take_model import fronts
-    from tbha_graph.mocap.skeleton import JOINT_NAMES
 
     P, uv, centre, L = synthetic(truth, 12)
-    w, h = int(truth["width"]), int(truth["height"])
-    suit = {"points": uv, "tracked": np.ones(uv.shape[:2], bool), "fps": np.array(30.0), "width": np.array(w),
-            "height": np.array(h), "joint_names": np.array(JOINT_NAMES)}
+    suit = suit_tracks(truth, uv)
     facing = np.stack(fronts(P), axis=1)  # (12, 2, 3) camera axes
     keypoints = dict(suit, points=700.0 * P[..., :2] / P[..., 2:3] + centre, facing=facing)
-    seen = []
-    real = st.solve_take_arrays
-
-    def recording(*args, **kwargs):
-        seen.append(kwargs.get("hints"))
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(st, "solve_take_arrays", recording)
-    params = {"focal_px": 700.0, "max_iterations": 2, "calib_iterations": 2, "side_search": False, "cross_seed": False}
+    seen = solver_calls(monkeypatch, "hints")
+    params = QUICK_NODE_PARAMS
     run_node(st.solve_take, params, tracks=suit, keypoints=keypoints)
     np.testing.assert_array_equal(seen[-1]["facing"], facing)
     run_node(st.solve_take, params, tracks=suit)  # neither carries one: no facing term
@@ -622,20 +640,12 @@ def test_node_hands_the_detectors_3d_pose_to_the_solver_where_it_saw_someone(tru
     from tbha_graph.mocap.skeleton import JOINT_NAMES
 
     P, uv, _, _ = synthetic(truth, 12)
-    suit = {"points": uv, "tracked": np.ones(uv.shape[:2], bool), "fps": np.array(30.0), "width": np.array(int(truth["width"])),
-            "height": np.array(int(truth["height"])), "joint_names": np.array(JOINT_NAMES)}
+    suit = suit_tracks(truth, uv)
     seen_by_detector = np.ones((12, 16), bool)
     seen_by_detector[4:6] = False
     motion = {"joints": P.copy(), "tracked": seen_by_detector, "fps": np.array(30.0), "joint_names": np.array(JOINT_NAMES)}
-    got = []
-    real = st.solve_take_arrays
-
-    def recording(*args, **kwargs):
-        got.append(kwargs.get("pose3d"))
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(st, "solve_take_arrays", recording)
-    params = {"focal_px": 700.0, "max_iterations": 2, "calib_iterations": 2, "side_search": False, "cross_seed": False}
+    got = solver_calls(monkeypatch, "pose3d")
+    params = QUICK_NODE_PARAMS
     run_node(st.solve_take, params, tracks=suit, pose3d=motion)
     assert np.isnan(got[-1][4:6]).all()
     np.testing.assert_array_equal(np.delete(got[-1], [4, 5], axis=0), np.delete(P, [4, 5], axis=0))
