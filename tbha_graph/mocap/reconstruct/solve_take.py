@@ -497,14 +497,17 @@ def joints_from_directions(root: np.ndarray, dirs: np.ndarray, lengths: np.ndarr
 
 def solve_windows(points, weight, lengths, centre, fps, P0, floor, g, p: SolveTakeParams, contact,
                   window: int, overlap: int, progress=None,
-                  silhouette: SilhouetteField | None = None, hints: dict | None = None) -> tuple[np.ndarray, int, int]:
+                  silhouette: SilhouetteField | None = None, hints: dict | None = None,
+                  pose3d: np.ndarray | None = None) -> tuple[np.ndarray, int, int, list]:
     """The final solve of a long take in overlapping windows of ``window`` frames, camera and floor held
     (globals ``g``, floor ``(normal, offset)``): LM, the depth-side search, LM on each window in turn, started
     from ``P0`` ``(n, 16, 3)`` with its first ``overlap`` frames from the previous window's solution (so depth
     sides carry on), which it replaces over the overlap by a linear cross-fade of root positions and bone
-    directions (the actor's ``silhouette`` and a detector's ``hints``, if any, on each window's frames). Memory is that of one window;
-    time is linear in the frames. Returns joints ``(n, 16, 3)`` (camera frame, metres), the mirrors kept and the
-    number of windows; ``progress`` (optional) wraps the windows' iterable as ``ctx.progress`` does."""
+    directions (the actor's ``silhouette`` and a detector's ``hints``, if any, on each window's frames; with a
+    detector's 3D ``pose3d`` ``(n, 16, 3)``, each window's second start where no torso patch is seen,
+    :func:`cheaper_of_two_starts`). Memory is that of one window; time is linear in the frames. Returns joints
+    ``(n, 16, 3)`` (camera frame, metres), the mirrors kept, the number of windows and each window's second start
+    (:func:`cheaper_of_two_starts`' second value); ``progress`` (optional) wraps the windows' iterable as ``ctx.progress`` does."""
     n = P0.shape[0]
     P = P0.copy()
     L = np.linalg.norm(P0[0, 1:] - P0[0, PARENTS[1:]], axis=-1)
@@ -516,13 +519,19 @@ def solve_windows(points, weight, lengths, centre, fps, P0, floor, g, p: SolveTa
         if b == n:
             break
         a = b - overlap
-    kept, prev_end = 0, 0  # frames [a, prev_end) hold the previous window's solution (the overlap)
+    kept, prev_end, starts = 0, 0, []  # frames [a, prev_end) hold the previous window's solution (the overlap)
     for a, b in (progress(wins, total=len(wins), desc="pose windows") if progress else wins):
         rows = slice(a, b)
-        prob, x, _, _, k = solve_frames(points[rows], weight[rows], lengths, centre, fps, P[rows], floor, g, p,
-                                        p.max_iterations, None, p.side_search, contact[rows], hold_globals=True,
-                                        tol=POSE_TOL, silhouette=None if silhouette is None else silhouette.subset(rows),
-                                        hints=hints_on(hints, rows), side_passes=p.side_search_passes)
+
+        def solve(P_start, rows=rows):
+            return solve_frames(points[rows], weight[rows], lengths, centre, fps, P_start, floor, g, p,
+                                p.max_iterations, None, p.side_search, contact[rows], hold_globals=True,
+                                tol=POSE_TOL, silhouette=None if silhouette is None else silhouette.subset(rows),
+                                hints=hints_on(hints, rows), side_passes=p.side_search_passes)
+
+        (prob, x, _, _, k), start = cheaper_of_two_starts(solve, solve(P[rows]), None if pose3d is None else pose3d[rows],
+                                                         weight[rows], lengths)
+        starts.append(start)
         kept += k
         Pw = prob.solution(x)[4]
         lo = prev_end - a
@@ -534,7 +543,7 @@ def solve_windows(points, weight, lengths, centre, fps, P0, floor, g, p: SolveTa
             P[a:prev_end] = joints_from_directions(root, dirs, L)
         P[a + lo:b] = Pw[lo:]
         prev_end = b
-    return P, kept, len(wins)
+    return P, kept, len(wins), starts
 
 
 def moved_in_depth(P: np.ndarray, nf: np.ndarray, d: float, scale: float) -> tuple[np.ndarray, float]:
@@ -591,8 +600,8 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
     and the pelvis's fronts (``sigma_facing``) and its keypoints where the suit's points are lost (``sigma_kp``); ``pose3d``
     ``(n, 16, 3)`` (optional; NaN rows where absent) a detector's own 3D joints, any frame and scale: on the frames
     where no torso patch is seen, the final pose solve is run a second time from its limbs' directions
-    (:func:`limbs_from_pose`) and the cheaper solve kept (``report["pose3d_start_kept"]``; takes solved whole, up to
-    ``window_frames``; a longer take's windows do not use it). Returns a dict with
+    (:func:`limbs_from_pose`) and the cheaper solve kept (``report["pose3d_start_kept"]``; on a take longer than
+    ``window_frames``, in each window). Returns a dict with
     ``joints`` (n, 16, 3) world metres, ``camera`` (:class:`Camera`), ``sides`` (n, 16) int8, ``report``.
 
     BLAS runs on one thread meanwhile: the solver's matrices are small (33 x 33 frame blocks, a band of 99),
@@ -649,6 +658,33 @@ def limbs_from_pose(P: np.ndarray, pose: np.ndarray, frames: np.ndarray, lengths
         u = u / np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-9)
         out[rows, j] = out[rows, PARENTS[j]] + lengths[j] * u
     return out
+
+
+def cheaper_of_two_starts(solve, first: tuple, pose3d: np.ndarray | None, weight: np.ndarray, lengths: np.ndarray):
+    """``first`` (a :func:`solve_frames` result ``(problem, x, cost, normal equations, flips)``) or ``solve(P)``
+    (the same solve from joints ``P`` ``(n, 16, 3)``), whichever ends cheaper, where ``P`` is ``first``'s answer with the
+    limbs of a detector's own 3D ``pose3d`` ``(n, 16, 3)`` (NaN rows where it saw no one) on the frames where no torso
+    patch is seen (``weight`` ``(n, 16)``; :func:`limbs_from_pose`). Returns the chosen result and
+    ``(frames restarted, kept, first's cost, second's cost)``, or ``None`` when no frame needed a second start."""
+    if pose3d is None:
+        return first, None
+    pose3d = np.asarray(pose3d, dtype=np.float64)
+    rows = torso_unseen(weight) & np.isfinite(pose3d).all(axis=(1, 2))
+    if not rows.any():
+        return first, None
+    second = solve(limbs_from_pose(first[0].solution(first[1])[4], pose3d, rows, lengths))
+    kept = bool(second[2] < first[2])
+    return (second if kept else first), (int(rows.sum()), kept, float(first[2]), float(second[2]))
+
+
+def second_start_report(report: dict, starts: list) -> None:
+    """``report`` updated with what :func:`cheaper_of_two_starts` did (``starts``: its second values, one per solve
+    or window; None entries skipped): the frames restarted, whether any second start was kept, and the costs
+    summed over the solves that had one."""
+    starts = [s for s in starts if s is not None]
+    if starts:
+        report.update(pose3d_start_frames=sum(s[0] for s in starts), pose3d_start_kept=any(s[1] for s in starts),
+                      pose_cost=round(sum(s[2] for s in starts), 1), pose_cost_pose3d=round(sum(s[3] for s in starts), 1))
 
 
 def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams, progress, confidence, sil,
@@ -769,27 +805,24 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
                                                 side_passes=p.side_search_passes)
         # a second start: the detector's own 3D limbs where no torso patch is seen (the back turned: the solve's own
         # answer there is often a dearer basin than one near the truth, bench/solver_landscape.py), the cheaper kept
-        second_rows = None if pose3d is None else torso_unseen(weight) & np.isfinite(pose3d).all(axis=(1, 2))
-        if second_rows is not None and second_rows.any():
-            P_2 = limbs_from_pose(prob.solution(x)[4], np.asarray(pose3d, dtype=np.float64), second_rows, lengths)
-            f_2, nf_2, d_2, _, _ = prob.solution(x)
-            g_2 = np.concatenate([[np.log(f_2), 0.0, 0.0, d_2], prob.globals_of(x)[4:]])
-            second = solve_frames(points, weight, lengths, centre, fps, P_2, (nf_2, d_2), g_2, p, p.max_iterations,
-                                  (f_2, 1e-4), p.side_search, contact, tol=POSE_TOL, silhouette=sil,
-                                  floor_prior=floor_prior, hints=hint(slice(None)), side_passes=p.side_search_passes)
-            report.update(pose3d_start_frames=int(second_rows.sum()), pose3d_start_kept=bool(second[2] < cost),
-                          pose_cost=round(float(cost), 1), pose_cost_pose3d=round(float(second[2]), 1))
-            if second[2] < cost:
-                prob, x, cost, ne, kept2 = second
+        f_2, nf_2, d_2, _, _ = prob.solution(x)
+        g_2 = np.concatenate([[np.log(f_2), 0.0, 0.0, d_2], prob.globals_of(x)[4:]])
+        (prob, x, cost, ne, kept2), start = cheaper_of_two_starts(
+            lambda P_2: solve_frames(points, weight, lengths, centre, fps, P_2, (nf_2, d_2), g_2, p, p.max_iterations,
+                                     (f_2, 1e-4), p.side_search, contact, tol=POSE_TOL, silhouette=sil,
+                                     floor_prior=floor_prior, hints=hint(slice(None)), side_passes=p.side_search_passes),
+            (prob, x, cost, ne, kept2), pose3d, weight, lengths)
+        second_start_report(report, [start])
     elif not whole:  # the same in windows, camera and floor held
         f_sel, nf_s, d_s, _, P_s = prob.solution(x)
         g_s = np.concatenate([[np.log(f_sel), 0.0, 0.0, d_s], prob.globals_of(x)[4:]])
         P_w = interpolate_joints(P_s, cam_rows, n)
         if sil is not None:
             P_w = seat_on_outline(P_w, f_sel, centre, nf_s, d_s, sil, facing_away(weight))
-        P_w, kept2, report["windows"] = solve_windows(points, weight, lengths, centre, fps, P_w,
+        P_w, kept2, report["windows"], starts = solve_windows(points, weight, lengths, centre, fps, P_w,
                                    (nf_s, d_s), g_s, p, contact, p.window_frames, p.window_overlap, progress, sil,
-                                   hint(slice(None)))
+                                   hint(slice(None)), pose3d)
+        second_start_report(report, starts)
         prob, _ = make_problem(points, weight, lengths, centre, fps, P_w, (nf_s, d_s), p, None, contact, g_s, sil,
                                hints=hint(slice(None)))
         x = pack_initial(P_w, prob.ref)
