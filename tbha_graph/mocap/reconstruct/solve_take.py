@@ -805,13 +805,14 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
                                                 side_passes=p.side_search_passes)
         # a second start: the detector's own 3D limbs where no torso patch is seen (the back turned: the solve's own
         # answer there is often a dearer basin than one near the truth, bench/solver_landscape.py), the cheaper kept
-        f_2, nf_2, d_2, _, _ = prob.solution(x)
-        g_2 = np.concatenate([[np.log(f_2), 0.0, 0.0, d_2], prob.globals_of(x)[4:]])
-        (prob, x, cost, ne, kept2), start = cheaper_of_two_starts(
-            lambda P_2: solve_frames(points, weight, lengths, centre, fps, P_2, (nf_2, d_2), g_2, p, p.max_iterations,
-                                     (f_2, 1e-4), p.side_search, contact, tol=POSE_TOL, silhouette=sil,
-                                     floor_prior=floor_prior, hints=hint(slice(None)), side_passes=p.side_search_passes),
-            (prob, x, cost, ne, kept2), pose3d, weight, lengths)
+        def again(P_2, first=(prob, x)):  # the same solve from P_2, the first's camera and floor held (only if needed)
+            f_2, nf_2, d_2, _, _ = first[0].solution(first[1])
+            g_2 = np.concatenate([[np.log(f_2), 0.0, 0.0, d_2], first[0].globals_of(first[1])[4:]])
+            return solve_frames(points, weight, lengths, centre, fps, P_2, (nf_2, d_2), g_2, p, p.max_iterations,
+                                (f_2, 1e-4), p.side_search, contact, tol=POSE_TOL, silhouette=sil,
+                                floor_prior=floor_prior, hints=hint(slice(None)), side_passes=p.side_search_passes)
+
+        (prob, x, cost, ne, kept2), start = cheaper_of_two_starts(again, (prob, x, cost, ne, kept2), pose3d, weight, lengths)
         second_start_report(report, [start])
     elif not whole:  # the same in windows, camera and floor held
         f_sel, nf_s, d_s, _, P_s = prob.solution(x)
