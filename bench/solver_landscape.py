@@ -12,7 +12,14 @@ it; a dearer one, that the model itself prefers the wrong answer. Prints per tak
 (the node's answer as it is) and, over the takes, ``truth_cheaper_takes`` and the means over all sixteen and the
 twelve turning takes (``all16_truth_basin_mm``: what a perfect search would reach with today's model).
 
-    python bench/solver_landscape.py [--takes sample,walk131_01_f500_low] [--iterations 60]
+With ``--terms``, also which of the model's terms make the difference: per take ``<take>_term_<name>=`` the truth's
+basin's cost of that kind of residual minus the node's basin's (:meth:`.take_model.TakeProblem.term_costs`:
+reprojection, torso, hinge, floor, contact, pose, silhouette, cover, upright, hang, keypoints, facing, tpose,
+acceleration, slide), and over the takes ``all16_term_<name>=`` / ``turning12_term_<name>=`` their means. A
+positive figure is a term that prefers the node's answer to the one near the truth: where the model's own minimum
+is off, these say which part of the model puts it there.
+
+    python bench/solver_landscape.py [--takes sample,walk131_01_f500_low] [--iterations 60] [--terms]
 """
 from __future__ import annotations
 
@@ -68,8 +75,15 @@ def landscape(take, cache: Cache, iterations: int) -> dict:
         x, cost, _, _ = levenberg_marquardt(prob, x0, iterations, 1e-9)
         joints = prob.solution(x)[4]
         out[f"{label}_basin_cost"] = float(cost)
+        out[f"{label}_terms"] = prob.term_costs(x)
         out[f"{label}_basin_mm"] = float(np.linalg.norm(joints - truth_cam, axis=-1).mean() * 1000.0)
     return out
+
+
+def term_differences(row: dict) -> dict[str, float]:
+    """Per kind of residual, the truth's basin's cost minus the node's (positive: the term prefers the node's answer)."""
+    node, truth = row["node_terms"], row["truth_terms"]
+    return {k: truth[k] - node[k] for k in node}
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -77,6 +91,7 @@ def main(argv: list[str] | None = None) -> None:
     every = ["sample"] + [t[0] for t in SOLVER_TAKES] + TURNING
     ap.add_argument("--takes", default=None, help="comma-separated take names (default: all sixteen)")
     ap.add_argument("--iterations", type=int, default=60, help="LM iterations of each polish")
+    ap.add_argument("--terms", action="store_true", help="also each kind of residual's cost, truth's basin minus node's")
     a = ap.parse_args(argv)
     takes = every if a.takes is None else [t for t in every if take_name(t) in a.takes.split(",")]
     if not takes:
@@ -87,7 +102,11 @@ def main(argv: list[str] | None = None) -> None:
         name = take_name(take)
         rows[name] = r = landscape(take, cache, a.iterations)
         for k, v in r.items():
-            print(f"{name}_{k}={v:.1f}", flush=True)
+            if not k.endswith("_terms"):
+                print(f"{name}_{k}={v:.1f}", flush=True)
+        if a.terms:
+            for term, diff in term_differences(r).items():
+                print(f"{name}_term_{term}={diff:+.1f}", flush=True)
     names = list(rows)
     cheaper = [k for k in names if rows[k]["truth_basin_cost"] < rows[k]["node_basin_cost"]]
     print(f"truth_cheaper_takes={len(cheaper)}/{len(names)}")
@@ -96,6 +115,10 @@ def main(argv: list[str] | None = None) -> None:
         if group:
             for key in ("node_mm", "node_basin_mm", "truth_basin_mm"):
                 print(f"{label}{len(group)}_{key}={np.mean([rows[k][key] for k in group]):.1f}")
+            if a.terms:
+                diffs = [term_differences(rows[k]) for k in group]
+                for term in dict.fromkeys(t for d in diffs for t in d):  # every kind any take has (0 where absent)
+                    print(f"{label}{len(group)}_term_{term}={np.mean([d.get(term, 0.0) for d in diffs]):+.1f}")
 
 
 if __name__ == "__main__":
