@@ -14,8 +14,8 @@ twelve turning takes (``all16_truth_basin_mm``: what a perfect search would reac
 
 With ``--terms``, also which of the model's terms make the difference: per take ``<take>_term_<name>=`` the truth's
 basin's cost of that kind of residual minus the node's basin's (:meth:`.take_model.TakeProblem.term_costs`:
-reprojection, torso, hinge, floor, contact, pose, silhouette, cover, upright, hang, keypoints, facing, tpose,
-acceleration, slide), and over the takes ``all16_term_<name>=`` / ``turning12_term_<name>=`` their means. A
+reprojection, torso, hinge, below_floor, contact, pose, silhouette, cover, upright, hang, keypoints, facing, tpose,
+acceleration, slide, priors), and over the takes ``all16_term_<name>=`` / ``turning12_term_<name>=`` their means. A
 positive figure is a term that prefers the node's answer to the one near the truth: where the model's own minimum
 is off, these say which part of the model puts it there.
 
