@@ -1,9 +1,9 @@
 """How well ``reconstruct.solve_take`` finds planted feet from the image (:func:`.solve_take.contacts_from_image`),
 against each render's own stances, on the sixteen renders of ``bench/solver_sweep.py``.
 
-A stance frame of the truth: the ankle joint moves under ``STANCE_SPEED`` (0.35 m/s, the slower of its steps to the
-two neighbouring frames) and lies within ``STANCE_BAND`` (4 cm) of its lowest height over the take (its 5th
-percentile), on a frame where the tracker has the ankle's point. Prints per take ``<take>_recall=`` (stance frames
+A stance frame of the truth: an ankle ``filter.foot_contact`` finds planted on the truth's own joints (its
+``detect_contacts`` with its default params: smoothed speed under 0.3 m/s, within 5 cm of the ankles' 5th-percentile
+height, contacts of at least 0.1 s), on a frame where the tracker has the ankle's point. Prints per take ``<take>_recall=`` (stance frames
 found), ``<take>_precision=`` (found frames that are stance frames) and ``<take>_false=`` (found frames that are
 not), each ankle counted per frame; then ``all16_recall``, ``all16_precision`` (means over the takes) and
 ``all16_false`` (the sum). Inputs come from the default pipeline's nodes in the user cache (run where missing).
@@ -25,25 +25,15 @@ from solver_accuracy import TAKES as SOLVER_TAKES  # noqa: E402
 from solver_sweep import TURNING, solver_inputs  # noqa: E402
 
 from tbha_graph.core.cache import Cache  # noqa: E402
+from tbha_graph.mocap.filter.foot_contact import FootContactParams, detect_contacts, floor_height  # noqa: E402
 from tbha_graph.mocap.reconstruct.solve_take import ANKLES, contacts_from_image  # noqa: E402
 
-#: A truth ankle slower than this (m/s) ...
-STANCE_SPEED = 0.35
-#: ... and within this (m) of its lowest height is planted
-STANCE_BAND = 0.04
-
-
 def truth_stance(joints: np.ndarray, fps: float) -> np.ndarray:
-    """Planted ankles ``(n, 2)`` bool of the truth's world joints ``(n, 16, 3)`` (metres, y up)."""
-    ank = joints[:, ANKLES]
-    n = ank.shape[0]
-    speed = np.zeros((n, 2))
-    if n > 1:
-        step = np.linalg.norm(np.diff(ank, axis=0), axis=-1) * fps
-        speed[0], speed[-1] = step[0], step[-1]
-        speed[1:-1] = np.minimum(step[1:], step[:-1])
-    h = ank[..., 1]
-    return (speed < STANCE_SPEED) & (h < np.percentile(h, 5, axis=0) + STANCE_BAND)
+    """Planted ankles ``(n, 2)`` bool (left, right) of the truth's world joints ``(n, 16, 3)`` (metres, y up), as
+    ``filter.foot_contact`` finds them."""
+    p = FootContactParams()
+    c = detect_contacts(joints, fps, p, floor_height(joints, p.floor_percentile))
+    return np.stack([c["left"], c["right"]], axis=1)
 
 
 def main() -> None:
