@@ -29,6 +29,12 @@ setting is better than another when its mean is, by more than their spreads.
     python bench/solver_sweep.py --no-keypoints                   # without MediaPipe's keypoints (default.yaml's detect off)
     python bench/solver_sweep.py --no-pose3d                      # without MediaPipe's 3D limbs as a second start
     python bench/solver_sweep.py --node-set detect.threshold=0.3  # another node's param (here MediaPipe's visibility threshold)
+    python bench/solver_sweep.py --repeats 3 --set sigma_acc=20 --against base.txt   # against an earlier run's output
+
+``--against FILE`` (an earlier run's output, e.g. the defaults' saved with ``> base.txt``) also prints, as each take
+ends, ``<take>_delta_mm`` (this run's mean minus that run's) and ``worse_so_far=K/N`` (takes worse so far), and at
+the end ``<mean>_delta_mm`` and ``worse_takes=K/N``: a change that is worse on most of the first takes can be
+stopped there (Ctrl-C) instead of after all sixteen.
 """
 from __future__ import annotations
 
@@ -129,6 +135,37 @@ def solve(take, params: dict, focal: str, cache: Cache, repeats: int = 1, jitter
     return out
 
 
+def read_figures(path: Path) -> dict[str, float]:
+    """The ``name=value`` figures of an earlier run's output ``path`` (numbers only; other lines ignored). Raises
+    ``ValueError`` naming the file when it holds no take's figure."""
+    out: dict[str, float] = {}
+    for line in Path(path).read_text(errors="replace").splitlines():
+        key, sep, value = line.strip().partition("=")
+        if sep and key.endswith("_mm"):
+            try:
+                out[key] = float(value)
+            except ValueError:
+                continue
+    if "sample_mpjpe_mm" not in out:
+        raise ValueError(f"{path}: no 'sample_mpjpe_mm=' line: not the output of bench/solver_sweep.py")
+    return out
+
+
+def compared(name: str, value: float, before: dict[str, float], worse: list[bool] | None) -> list[str]:
+    """Lines comparing this run's ``<name>_mpjpe_mm`` ``value`` with ``before`` (:func:`read_figures`): the delta and,
+    for a take (``worse`` given), the running count of takes worse than before (appended to ``worse``). Nothing when
+    ``before`` lacks the figure."""
+    key = f"{name}_mpjpe_mm" if not name.endswith("_mean") else f"{name}_mm"
+    if key not in before:
+        return []
+    delta = value - before[key]
+    lines = [f"{name}_delta_mm={delta:+.1f}"]
+    if worse is not None:
+        worse.append(delta > 0)
+        lines.append(f"worse_so_far={sum(worse)}/{len(worse)}")
+    return lines
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n")[0])
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
@@ -142,9 +179,18 @@ def main(argv: list[str] | None = None) -> None:
                     "start where no torso patch is seen (default.yaml's reconstruct input pose3d)")
     ap.add_argument("--no-keypoints", dest="keypoints", action="store_false", help="without MediaPipe's keypoints where no "
                     "torso patch is seen (default.yaml's node detect off; with them Pose runs once per take, then cached)")
+    ap.add_argument("--against", type=Path, metavar="FILE", help="an earlier run's output: print each figure's delta "
+                    "from it and how many takes are worse")
     args = ap.parse_args(argv)
     if args.repeats < 1 or args.jitter_px < 0:
         ap.error("--repeats must be >= 1 and --jitter-px >= 0")
+    before: dict[str, float] = {}
+    if args.against is not None:
+        try:
+            before = read_figures(args.against)
+        except (OSError, ValueError) as e:
+            ap.error(f"--against: {e}")
+    worse: list[bool] = []
     params = {}
     for item in args.set:
         key, sep, value = item.partition("=")
@@ -170,6 +216,8 @@ def main(argv: list[str] | None = None) -> None:
         print(f"{name}_mpjpe_mm={np.mean(seq):.1f}", flush=True)
         if args.repeats > 1:
             print(f"{name}_mpjpe_mm_min={min(seq):.1f}\n{name}_mpjpe_mm_max={max(seq):.1f}", flush=True)
+        for line in compared(name, round(float(np.mean(seq)), 1), before, worse):
+            print(line, flush=True)
     names = list(scores)
     v = np.array([[s["seq"] for s in scores[k]] for k in names])  # (takes, repeats)
     held = [i for i, k in enumerate(names) if k.startswith("held_")]
@@ -178,6 +226,10 @@ def main(argv: list[str] | None = None) -> None:
         print(f"{label}_mean_mm={per_repeat.mean():.1f}")
         if args.repeats > 1:
             print(f"{label}_mean_mm_min={per_repeat.min():.1f}\n{label}_mean_mm_max={per_repeat.max():.1f}")
+        for line in compared(f"{label}_mean", round(float(per_repeat.mean()), 1), before, None):
+            print(line)
+    if before:
+        print(f"worse_takes={sum(worse)}/{len(worse)}")
     for key, unit in (("rootrel", "mm"), ("tpose", "mm"), ("ms", "ms_per_frame")):
         a = np.array([[s[key] for s in scores[k]] for k in names])
         label = f"all16_{key}_mean_mm" if unit == "mm" else "all16_ms_per_frame"
