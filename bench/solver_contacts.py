@@ -28,6 +28,7 @@ from tbha_graph.core.cache import Cache  # noqa: E402
 from tbha_graph.mocap.filter.foot_contact import FootContactParams, detect_contacts, floor_height  # noqa: E402
 from tbha_graph.mocap.reconstruct.solve_take import ANKLES, contacts_from_image  # noqa: E402
 
+
 def truth_stance(joints: np.ndarray, fps: float) -> np.ndarray:
     """Planted ankles ``(n, 2)`` bool (left, right) of the truth's world joints ``(n, 16, 3)`` (metres, y up), as
     ``filter.foot_contact`` finds them."""
@@ -46,12 +47,12 @@ def main() -> None:
         want = truth_stance(np.asarray(truth["joints3d_world"], dtype=np.float64)[:tr.n_frames], fps)
         want &= tr.tracked[:, ANKLES]
         got = contacts_from_image(tr.points, tr.tracked, fps)
-        hit = int((got & want).sum())
+        hit, wrong = int((got & want).sum()), int((got & ~want).sum())
         recall.append(hit / max(int(want.sum()), 1))
         precision.append(hit / max(int(got.sum()), 1))
-        false += int((got & ~want).sum())
-        print(f"{name}_recall={recall[-1]:.3f}", f"{name}_precision={precision[-1]:.3f}",
-              f"{name}_false={int((got & ~want).sum())}", sep="\n", flush=True)
+        false += wrong
+        print(f"{name}_recall={recall[-1]:.3f}", f"{name}_precision={precision[-1]:.3f}", f"{name}_false={wrong}",
+              sep="\n", flush=True)
     print(f"all16_recall={np.mean(recall):.3f}", f"all16_precision={np.mean(precision):.3f}", f"all16_false={false}",
           sep="\n")
 
