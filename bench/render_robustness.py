@@ -7,7 +7,7 @@ and prints ``name=value`` lines per variant:
     patch centres), _doubtful_frames (frames in metrics.json's doubtful_ranges), _warnings, _verdict, _seconds
     (the capture alone; the render is not counted)
 
-    python bench/render_robustness.py [--estimate] [--only NAME[,NAME...]] [--list] [--keep DIR]
+    python bench/render_robustness.py [--estimate] [--only NAME[,NAME...]] [--list] [--keep DIR] [--set NODE.PARAM=V]
         # default: the render's focal length is given (--var focal_px=F) so tracking and segmentation problems are
         # not hidden by the focal estimate's luck; --estimate: the focal length is estimated (the pipeline's default)
         # --keep DIR: keep each variant's render and run in DIR/<variant>/ (overlay.mp4, errors.png, ...)
@@ -168,13 +168,17 @@ def render(name: str, v: dict, folder: Path) -> tuple[Path, Path]:
     return video, npz
 
 
-def capture(name: str, v: dict, video: Path, npz: Path, out: Path, estimate: bool) -> dict:
+def capture(name: str, v: dict, video: Path, npz: Path, out: Path, estimate: bool, sets: list[str] = ()) -> dict:
+    """Runs ``pipelines/default.yaml`` on a variant's render (``sets``: ``NODE.PARAM=VALUE`` for every variant, as
+    ``tbha-run --set``) and returns its figures from ``metrics.json`` (or ``error``)."""
     cmd = [sys.executable, "-m", "tbha_graph.cli.run", str(ROOT / "pipelines" / "default.yaml"), "--quiet",
            "--var", f"video={video}", "--var", f"ground_truth={npz}", "--out", str(out),
            "--cache-dir", str(out.parent / "cache")]
     if not estimate:
         cmd += ["--var", f"focal_px={v['focal']}"]
     cmd += [a.format(stature=f"{stature(v['scale']):.4f}") for a in v["capture"]]
+    for item in sets:
+        cmd += ["--set", item]
     t0 = time.perf_counter()
     run = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
     dt = time.perf_counter() - t0
@@ -204,6 +208,9 @@ def main() -> None:
     ap.add_argument("--only", help="comma-separated variant names")
     ap.add_argument("--list", action="store_true", help="list the variants and stop")
     ap.add_argument("--keep", type=Path, help="keep renders and runs in DIR/<variant>/ (reused when present)")
+    ap.add_argument("--set", action="append", default=[], metavar="NODE.PARAM=VALUE",
+                    help="a node's param for every variant's capture (tbha-run --set); with --keep its runs go to run_set/ "
+                         "or run_est_set/, beside those without")
     args = ap.parse_args()
     if args.list:
         print("\n".join(VARIANTS))
@@ -225,10 +232,10 @@ def main() -> None:
         npz = folder / "ground_truth.npz"
         if not (video.is_file() and npz.is_file()):
             video, npz = render(name, v, folder)
-        out = folder / ("run_est" if args.estimate else "run")
-        if out.exists():
+        out = folder / (("run_est" if args.estimate else "run") + ("_set" if args.set else ""))
+        if out.exists():  # this bench's own earlier output
             shutil.rmtree(out)
-        res = capture(name, v, video, npz, out, args.estimate)
+        res = capture(name, v, video, npz, out, args.estimate, args.set)
         for k, val in res.items():
             print(f"{name}_{k}={fmt(val)}")
         sys.stdout.flush()

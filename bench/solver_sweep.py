@@ -19,7 +19,9 @@ Even the mean over sixteen takes moves by ~15 mm with a change that should do no
 tracks as they are and the others on the tracks plus Gaussian noise of ``--jitter-px`` (0.05 px: a tenth of the
 tracker's own error; seeds 1 .. K-1, the same for every setting), and prints the means over the repeats, each take's
 ``_min``/``_max`` and each mean's ``_min``/``_max`` over the repeats (each repeat's own mean over the takes): a
-setting is better than another when its mean is, by more than their spreads.
+setting is better than another when its mean is, by more than their spreads. Each take's ``_focal_err_pct`` (the
+solver's focal length against the truth's, mean over the repeats) and ``all16_focal_abs_err_pct`` (mean and max of
+its magnitude over every take and repeat) say what the camera did.
 
     python bench/solver_sweep.py                                  # the default settings, the room's focal length
     python bench/solver_sweep.py --set sigma_px=1.0               # a SolveTakeParams field changed
@@ -30,6 +32,7 @@ setting is better than another when its mean is, by more than their spreads.
     python bench/solver_sweep.py --no-pose3d                      # without MediaPipe's 3D limbs as a second start
     python bench/solver_sweep.py --node-set detect.threshold=0.3  # another node's param (here MediaPipe's visibility threshold)
     python bench/solver_sweep.py --repeats 3 --set sigma_acc=20 --against base.txt   # against an earlier run's output
+    python bench/solver_sweep.py --repeats 3 --seed-offset 10     # three fresh noisy draws (seeds 10-12) of each take
 
 ``--against FILE`` (an earlier run's output, e.g. the defaults' saved with ``> base.txt``) also prints, as each take
 ends, ``<take>_delta_mm`` (this run's mean minus that run's) and ``worse_so_far=K/N`` (takes worse so far), and at
@@ -97,12 +100,13 @@ def solver_inputs(take, cache: Cache, keypoints: bool = True, node_sets: dict | 
 
 
 def solve(take, params: dict, focal: str, cache: Cache, repeats: int = 1, jitter_px: float = 0.05,
-          keypoints: bool = True, node_sets: dict | None = None, use_pose3d: bool = True) -> list[dict]:
+          keypoints: bool = True, node_sets: dict | None = None, use_pose3d: bool = True, seed_offset: int = 0) -> list[dict]:
     """Scores of the solver on ``take`` with ``SolveTakeParams(**params)``, one dict per repeat: ``seq`` (seq-MPJPE,
     mm), ``rootrel`` (root-relative after the same alignment, mm), ``tpose`` (the T-pose frames aligned on their
-    own, mm; NaN when the solver finds none) and ``ms`` (the solve's wall time per frame). The first repeat is on
-    the tracks as they are, repeat r >= 1 on the tracked points plus Gaussian noise of ``jitter_px`` pixels, seed
-    r); ``focal``: ``room`` (the ``lens`` node's estimate, as the default pipeline), ``given`` (the truth's) or
+    own, mm; NaN when the solver finds none), ``ms`` (the solve's wall time per frame) and ``focal_err`` (%). The
+    first repeat is on the tracks as they are, repeat r >= 1 on the tracked points plus Gaussian noise of
+    ``jitter_px`` pixels, seed r; with ``seed_offset`` k > 0 every repeat r is noisy, seed r + k (draws no setting
+    was chosen on); ``focal``: ``room`` (the ``lens`` node's estimate, as the default pipeline), ``given`` (the truth's) or
     ``take`` (no lens); ``keypoints``: with MediaPipe's keypoints where no torso patch is seen, as the default pipeline;
     ``use_pose3d``: with its own 3D limbs there as a second start of the final solve (``pose3d``), as the default pipeline."""
     tr, truth, sil, lens, hints, pose3d = solver_inputs(take, cache, keypoints, node_sets)
@@ -115,8 +119,8 @@ def solve(take, params: dict, focal: str, cache: Cache, repeats: int = 1, jitter
     out = []
     for r in range(repeats):
         points = tr.points
-        if r > 0:
-            points = points + np.random.default_rng(r).normal(0.0, jitter_px, points.shape)
+        if r > 0 or seed_offset > 0:
+            points = points + np.random.default_rng(r + seed_offset).normal(0.0, jitter_px, points.shape)
         t0 = time.perf_counter()
         res = st.solve_take_arrays(points, tr.tracked, body_lengths(None), tr.width, tr.height, float(tr.fps),
                                    st.SolveTakeParams(**p), silhouette=sil, lens=lens, hints=hints,
@@ -131,7 +135,9 @@ def solve(take, params: dict, focal: str, cache: Cache, repeats: int = 1, jitter
             rows = slice(found[0], found[1] + 1)
             held, _ = align_clip(res["joints"][rows], gt[rows], mode="rigid")
             tpose = float(np.linalg.norm(held - gt[rows], axis=-1).mean() * 1000.0)
-        out.append({"seq": float(err.mean() * 1000.0), "rootrel": float(rel.mean() * 1000.0), "tpose": tpose, "ms": ms})
+        focal_err = 100.0 * (float(res["report"]["focal_px"]) / float(np.asarray(truth["K"])[0, 0]) - 1.0)
+        out.append({"seq": float(err.mean() * 1000.0), "rootrel": float(rel.mean() * 1000.0), "tpose": tpose, "ms": ms,
+                    "focal_err": focal_err})
     return out
 
 
@@ -179,11 +185,13 @@ def main(argv: list[str] | None = None) -> None:
                     "start where no torso patch is seen (default.yaml's reconstruct input pose3d)")
     ap.add_argument("--no-keypoints", dest="keypoints", action="store_false", help="without MediaPipe's keypoints where no "
                     "torso patch is seen (default.yaml's node detect off; with them Pose runs once per take, then cached)")
+    ap.add_argument("--seed-offset", type=int, default=0, metavar="K",
+                    help="every repeat r on noisy tracks, seed r + K (K > 0): fresh draws, on which no default was chosen")
     ap.add_argument("--against", type=Path, metavar="FILE", help="an earlier run's output: print each figure's delta "
                     "from it and how many takes are worse")
     args = ap.parse_args(argv)
-    if args.repeats < 1 or args.jitter_px < 0:
-        ap.error("--repeats must be >= 1 and --jitter-px >= 0")
+    if args.repeats < 1 or args.jitter_px < 0 or args.seed_offset < 0:
+        ap.error("--repeats must be >= 1, --jitter-px and --seed-offset >= 0")
     before: dict[str, float] = {}
     if args.against is not None:
         try:
@@ -211,11 +219,13 @@ def main(argv: list[str] | None = None) -> None:
     scores: dict[str, list[dict]] = {}
     for take in ["sample"] + [t[0] for t in SOLVER_TAKES] + TURNING:
         name = take if isinstance(take, str) else f"{take[0]}_{take[1]}"
-        scores[name] = solve(take, params, args.focal, cache, args.repeats, args.jitter_px, args.keypoints, node_sets, args.pose3d)
+        scores[name] = solve(take, params, args.focal, cache, args.repeats, args.jitter_px, args.keypoints, node_sets,
+                             args.pose3d, args.seed_offset)
         seq = [s["seq"] for s in scores[name]]
         print(f"{name}_mpjpe_mm={np.mean(seq):.1f}", flush=True)
         if args.repeats > 1:
             print(f"{name}_mpjpe_mm_min={min(seq):.1f}\n{name}_mpjpe_mm_max={max(seq):.1f}", flush=True)
+        print(f"{name}_focal_err_pct={np.mean([s['focal_err'] for s in scores[name]]):+.2f}", flush=True)
         for line in compared(name, round(float(np.mean(seq)), 1), before, worse):
             print(line, flush=True)
     names = list(scores)
@@ -230,6 +240,8 @@ def main(argv: list[str] | None = None) -> None:
             print(line)
     if before:
         print(f"worse_takes={sum(worse)}/{len(worse)}")
+    focal = np.array([[s["focal_err"] for s in scores[k]] for k in names])
+    print(f"all16_focal_abs_err_pct={np.abs(focal).mean():.2f}\nall16_focal_abs_err_pct_max={np.abs(focal).max():.2f}")
     for key, unit in (("rootrel", "mm"), ("tpose", "mm"), ("ms", "ms_per_frame")):
         a = np.array([[s[key] for s in scores[k]] for k in names])
         label = f"all16_{key}_mean_mm" if unit == "mm" else "all16_ms_per_frame"
