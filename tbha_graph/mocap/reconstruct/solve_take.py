@@ -133,6 +133,12 @@ class SolveTakeParams(BaseModel):
     focal_grid: list[float] = Field([0.8, 1.1, 1.5], min_length=1, description="starting focal lengths tried, as multiples of the image width")
     focal_prior_width: float = Field(1.2, gt=0, description="centre of the weak focal-length prior, as a multiple of the image width")
     focal_prior_log_sd: float = Field(0.35, gt=0, description="standard deviation of log(focal) in that prior (0.35: x/÷ 1.4)")
+    lens_sd_floor_pct: float = Field(0.5, ge=0, description="uncertainty added to a room-lines focal length's own (its bootstrap) "
+                                     "before it is the solve's focal prior: the principal point off the image centre, lens "
+                                     "distortion and not quite perpendicular room lines are not in the bootstrap (raise it for "
+                                     "a lens that bends straight lines); the take's own pull on the focal length is biased "
+                                     "by about 1 % (renders), so it should not outweigh the room's lines",
+                                     json_schema_extra={"unit": "%"})
     tpose_frames: int = Field(10, ge=1, description="opening T-pose frames used to place the first skeleton")
     calib_frames: int = Field(70, ge=20, description="frames (spread over the take) used to solve focal, floor and point offsets")
     max_iterations: int = Field(12, ge=1, description="Levenberg-Marquardt iterations on the whole take")
@@ -306,12 +312,6 @@ def detect_contacts(P: np.ndarray, nf: np.ndarray, d: float, fps: float, ankle_h
 #: others unchanged) at 10 % of the solve's time
 POSE_TOL = 1e-3
 
-#: Uncertainty (log sd) added to a lens estimate's own before it is the focal prior: the principal point off the
-#: image centre, lens distortion and not quite perpendicular room lines are not in its bootstrap. Measured on the
-#: sample and two renders with room lines (mpjpe, focal error): this prior 51.4 / 113.1 / 54.5 mm (+0.3 / +3.4 /
-#: -3.5 %); the lens focal held instead 58.0 / 152.6 / 65.4 mm (+0.3 / -0.8 / -3.5 %): the pose search, not the
-#: focal length, makes the difference (131_01 given its true focal length: 94 mm)
-LENS_SD_FLOOR = 0.015
 
 #: The floor's normal is kept near the room's (when the room's lines lie on the floor), at least this uncertain, degrees
 FLOOR_SD_FLOOR_DEG = 0.5
@@ -595,7 +595,7 @@ def solve_take_arrays(points: np.ndarray, tracked: np.ndarray, lengths: np.ndarr
     ``ctx.progress``: wraps an iterable) shows the starts and the pose windows; ``silhouette`` (optional) the
     actor's outline on every frame; ``lens`` (optional) a focal length found before (``calibrate.vanishing_points``;
     ignored when it holds none): without ``p.focal_px`` the solve starts there and keeps it as a prior (its sd and
-    :data:`LENS_SD_FLOOR` combined), and the floor's normal found with it (``up_cam``) as a prior too (sd at least
+    ``p.lens_sd_floor_pct`` combined), and the floor's normal found with it (``up_cam``) as a prior too (sd at least
     :data:`FLOOR_SD_FLOOR_DEG`); ``hints`` (optional, :func:`detector_hints`) a detector's per-frame data: the thorax's
     and the pelvis's fronts (``sigma_facing``) and its keypoints where the suit's points are lost (``sigma_kp``); ``pose3d``
     ``(n, 16, 3)`` (optional; NaN rows where absent) a detector's own 3D joints, any frame and scale: on the frames
@@ -722,7 +722,7 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
             floor_prior = (np.asarray(lens.up_cam, dtype=np.float64),
                            np.radians(max(float(lens.up_sd_deg or 0.0), FLOOR_SD_FLOOR_DEG)))
             report["floor_source"] = "room lines"
-        starts, focal_prior = [f_room], (f_room, float(np.hypot(sd_room, LENS_SD_FLOOR)))
+        starts, focal_prior = [f_room], (f_room, float(np.hypot(sd_room, p.lens_sd_floor_pct / 100.0)))
         report["focal_source"] = f"room lines {f_room:.0f} px ± {100 * sd_room:.1f} %, refined by the take"
         q, estimated = p, False  # solved as with a given focal length, which the prior lets move by a few %
     else:
