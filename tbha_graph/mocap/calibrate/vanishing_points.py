@@ -89,7 +89,7 @@ def line_segments(image: np.ndarray, min_length_px: float, subpixel: bool = True
 
 
 def refine_segments(grey: np.ndarray, seg: np.ndarray, spacing_px: float = 2.0, reach_px: float = 3.0,
-                    step_px: float = 0.5, min_samples: int = 6) -> np.ndarray:
+                    step_px: float = 0.5, min_samples: int = 6, chunk: int = 64) -> np.ndarray:
     """Segments ``(k, 4)`` px re-fitted to the sub-pixel edge of the grey image ``(H, W)`` across them.
 
     The line detector fits its lines to whole-pixel edge points, which tilts short, nearly horizontal or vertical
@@ -100,19 +100,32 @@ def refine_segments(grey: np.ndarray, seg: np.ndarray, spacing_px: float = 2.0, 
     middle 80 % of each segment (its ends meet corners and other edges), at most ``spacing_px`` apart, the image
     gradient across it is read every ``step_px`` within ``reach_px`` (bilinear), its peak of the segment's
     polarity located to a fraction of a step (parabola through the peak and its neighbours), and a straight line
-    fitted to those peaks by least squares; a segment with fewer than ``min_samples`` clear peaks is kept as found."""
+    fitted to those peaks by least squares; a segment with fewer than ``min_samples`` clear peaks is kept as found.
+    ``chunk`` segments at a time, so memory stays bounded on large images."""
     import cv2
 
     g = grey.astype(np.float32)
     gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3)
     gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3)
+    longest = float(np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]).max())
+    samples = max(24, int(np.ceil(longest / spacing_px)))  # one count for all: the longest every spacing_px
+    t = 0.1 + 0.8 * (np.arange(samples) + 0.5) / samples  # along a segment (fraction of its length), ends left out
+    off = np.arange(-reach_px, reach_px + 1e-9, step_px)  # across it, px
+    return np.concatenate([_refit(gx, gy, seg[i:i + chunk], t, off, step_px, min_samples)
+                           for i in range(0, len(seg), chunk)])
+
+
+def _refit(gx: np.ndarray, gy: np.ndarray, seg: np.ndarray, t: np.ndarray, off: np.ndarray, step_px: float,
+           min_samples: int) -> np.ndarray:
+    """:func:`refine_segments` on segments ``(k, 4)``: the image's gradients ``gx``, ``gy`` ``(H, W)`` float32, the
+    sample points along (``t``, fractions) and across (``off``, px) each segment."""
+    import cv2
+
     a, b = seg[:, :2], seg[:, 2:]
     length = np.linalg.norm(b - a, axis=1)
     d = (b - a) / length[:, None]
     n = np.c_[-d[:, 1], d[:, 0]]
-    samples = max(24, int(np.ceil(length.max() / spacing_px)))  # one count for all: the longest every spacing_px
-    t = 0.1 + 0.8 * (np.arange(samples) + 0.5) / samples  # along the segment (fraction of its length), ends left out
-    off = np.arange(-reach_px, reach_px + 1e-9, step_px)  # across it, px
+    samples = len(t)
     pts = (a[:, None, None] + (t[None, :, None, None] * length[:, None, None, None]) * d[:, None, None]
            + off[None, None, :, None] * n[:, None, None])  # (k, samples, offsets, 2)
     mx = pts[..., 0].reshape(len(seg), -1).astype(np.float32)
