@@ -106,12 +106,13 @@ def test_limbs_hang_where_only_the_head_is_seen(cache):
     away = st.facing_away(tr.tracked.astype(float))
     assert away.sum() >= 30
     sil = st.silhouette_field(run.output("silhouette.silhouette"), n)
+    lens = run.output("lens.lens")
     errors = np.zeros((2, 3))
     for i, hang in enumerate((None, 1.0)):
         for seed in range(3):
             points = tr.points if seed == 0 else tr.points + np.random.default_rng(seed).normal(0.0, 0.05, tr.points.shape)
             res = st.solve_take_arrays(points, tr.tracked, body_lengths(None), tr.width, tr.height, float(tr.fps),
-                                       st.SolveTakeParams(sigma_hang=hang), silhouette=sil, lens=run.output("lens.lens"))
+                                       st.SolveTakeParams(sigma_hang=hang), silhouette=sil, lens=lens)
             J = res["joints"]
             errors[i, seed] = np.linalg.norm((J - J[:, :1]) - (truth - truth[:, :1]), axis=-1)[away].mean() * 1000
     without, with_hang = errors.mean(axis=1)
