@@ -19,6 +19,7 @@ given CRF, and the ground truth is re-bound to the re-encoded file (its sha256, 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import shutil
 import subprocess
@@ -202,6 +203,14 @@ def fmt(x) -> str:
     return str(x)
 
 
+def set_suffix(sets: list[str]) -> str:
+    """The run folder's suffix for these ``--set`` items: ``""`` without any, else ``_set_`` and 8 hex digits of a
+    hash of them (order-free), so runs with different settings do not replace each other."""
+    if not sets:
+        return ""
+    return "_set_" + hashlib.sha256("\n".join(sorted(sets)).encode()).hexdigest()[:8]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--estimate", action="store_true", help="estimate the focal length (default: given)")
@@ -209,8 +218,9 @@ def main() -> None:
     ap.add_argument("--list", action="store_true", help="list the variants and stop")
     ap.add_argument("--keep", type=Path, help="keep renders and runs in DIR/<variant>/ (reused when present)")
     ap.add_argument("--set", action="append", default=[], metavar="NODE.PARAM=VALUE",
-                    help="a node's param for every variant's capture (tbha-run --set); with --keep its runs go to run_set/ "
-                         "or run_est_set/, beside those without")
+                    help="a node's param for every variant's capture (tbha-run --set); with --keep its runs go to "
+                         "run_set_<hash>/ or run_est_set_<hash>/ (one folder per combination of settings, named by "
+                         "a hash of them and listing them in settings.txt), beside those without")
     args = ap.parse_args()
     if args.list:
         print("\n".join(VARIANTS))
@@ -232,10 +242,12 @@ def main() -> None:
         npz = folder / "ground_truth.npz"
         if not (video.is_file() and npz.is_file()):
             video, npz = render(name, v, folder)
-        out = folder / (("run_est" if args.estimate else "run") + ("_set" if args.set else ""))
+        out = folder / (("run_est" if args.estimate else "run") + set_suffix(args.set))
         if out.exists():  # this bench's own earlier output
             shutil.rmtree(out)
         res = capture(name, v, video, npz, out, args.estimate, args.set)
+        if args.set and out.is_dir():
+            (out / "settings.txt").write_text("\n".join(args.set) + "\n")
         for k, val in res.items():
             print(f"{name}_{k}={fmt(val)}")
         sys.stdout.flush()
