@@ -497,3 +497,58 @@ def search_turns_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, mask: np.nd
                 P[lo:hi] = outs[b]
                 kept += 1
     return P, kept
+
+
+#: The lean search's passes (:func:`search_leans_lm`): windows of about this many frames over the whole take
+LEAN_WINDOWS = (30, 15)
+#: The leans tried on each window, degrees of the upper body about the hip line (forwards and backwards)
+LEAN_ANGLES = (-16.0, -8.0, 8.0, 16.0)
+#: LM steps on each pass's candidates in :func:`search_leans_lm`
+LEAN_ITERATIONS = 3
+
+
+def leaned(P: np.ndarray, frames: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """``P`` ``(n, 16, 3)`` (camera frame, metres) with the upper body (the chest and every joint below it in the
+    tree: spine, head, arms) on ``frames`` ``(k,)`` turned rigidly about the hips by ``angle`` ``(k,)`` radians around
+    the hip line (left hip minus right hip: positive leans the body forwards, towards its front). Every bone keeps
+    its length."""
+    upper = np.array([J["chest"]] + descendants(J["chest"]))
+    axis = unit(P[frames, J["left_hip"]] - P[frames, J["right_hip"]])[:, None]
+    root = P[frames, 0][:, None]
+    X = P[frames][:, upper] - root
+    c, s = np.cos(angle)[:, None, None], np.sin(angle)[:, None, None]
+    X = X * c + np.cross(axis, X) * s + np.sum(X * axis, axis=-1, keepdims=True) * axis * (1.0 - c)  # Rodrigues
+    out = P.copy()
+    sub = out[frames]
+    sub[:, upper] = X + root
+    out[frames] = sub
+    return out
+
+
+def search_leans_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, windows: tuple[int, ...] = LEAN_WINDOWS,
+                    angles: tuple[float, ...] = LEAN_ANGLES, iterations: int = LEAN_ITERATIONS,
+                    margin: int = 2) -> tuple[np.ndarray, int]:
+    """Discrete search over the upper body's lean towards or away from the camera, which the image fixes only
+    through the spine's foreshortening (a torso leaning back with the hips a little lower projects nearly as one
+    upright): for each pass (``windows``: the take cut into pieces of about that many frames) and each piece, the
+    upper body leaned by each of ``angles`` (degrees, :func:`leaned`), ramped in over ``margin`` frames either side;
+    the current and the leaned copies are re-optimised together for ``iterations`` LM steps with the globals ``g``
+    held (:func:`solve_candidates`) and the cheapest kept. ``P`` ``(n, 16, 3)`` camera frame, metres. Returns the
+    joints and the number of leans kept."""
+    P = P.copy()
+    n = P.shape[0]
+    kept = 0
+    for window in windows:
+        cands = []
+        for r in np.array_split(np.arange(n), max(int(round(n / window)), 1)):
+            lo, hi = max(int(r[0]) - margin, 0), min(int(r[-1]) + 1 + margin, n)
+            fr = np.arange(lo, hi)
+            ramp = np.clip(np.minimum(fr - lo + 1, hi - fr) / (margin + 1.0), 0.0, 1.0)
+            ramp[(fr >= r[0]) & (fr <= r[-1])] = 1.0
+            cands.append((lo, hi, [P] + [leaned(P, fr, np.radians(a) * ramp) for a in angles]))
+        for (lo, hi, _), (outs, cost) in zip(cands, solve_candidates(prob, g, cands, iterations)):
+            b = int(np.argmin(cost))
+            if b > 0:
+                P[lo:hi] = outs[b]
+                kept += 1
+    return P, kept
