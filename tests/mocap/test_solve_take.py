@@ -544,13 +544,14 @@ def test_a_second_side_search_pass_redecides_what_the_first_left_behind(truth):
     by default: on the 16 renders within the scatter and 55 % slower) re-decides each group where mirrors kept after
     it changed the body (a limb decided before the pelvis was mirrored). The sample's first 90 frames made exactly
     representable, the model's own points projected exactly, the true focal length: measured 26.9 mm mean joint
-    error with one pass, 19.0 with two (exact 2D leaves the priors' bias and the search's misses, no noise)."""
+    error with one pass, 19.0 with two (exact 2D leaves the priors' bias and the search's misses, no noise). Without
+    the lean search (round 21), which these figures predate: with it both passes give 28.7 mm."""
     P, uv, _, L = synthetic(truth, 90, start=0)
     tracked = np.ones(uv.shape[:2], bool)
 
     def error_mm(passes):
         out = solve_take_arrays(uv, tracked, L, int(truth["width"]), int(truth["height"]), float(truth["fps"]),
-                                SolveTakeParams(focal_px=700.0, side_search_passes=passes))
+                                SolveTakeParams(focal_px=700.0, side_search_passes=passes, lean_search=False))
         return float(np.linalg.norm(out["camera_frame_joints"] - P, axis=-1).mean() * 1000.0)
 
     one, two = error_mm(1), error_mm(2)
