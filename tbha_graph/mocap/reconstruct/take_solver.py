@@ -491,12 +491,21 @@ def search_turns_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, mask: np.nd
             ramp[(fr >= run[0]) & (fr <= run[-1])] = 1.0
             turns = [mirror_turn(P[fr], prob.d.up) if a == MIRROR else np.full(hi - lo, np.radians(a)) for a in angles]
             cands.append((lo, hi, [P] + [turned(P, fr, prob.d.up, t * ramp) for t in turns]))
-        for (lo, hi, _), (outs, cost) in zip(wins, solve_candidates(prob, g, cands, iterations)):
-            b = int(np.argmin(cost))
-            if b > 0:
-                P[lo:hi] = outs[b]
-                kept += 1
+        kept += keep_cheapest(P, cands, solve_candidates(prob, g, cands, iterations))
     return P, kept
+
+
+def keep_cheapest(P: np.ndarray, cands: list, results: list) -> int:
+    """Each window of ``cands`` (:func:`solve_candidates`' ``[(lo, hi, [Q, ...]), ...]``, the current joints first)
+    set in ``P`` ``(n, 16, 3)`` to its cheapest re-optimised candidate from ``results`` (that function's answer), in
+    place; returns how many windows took one other than the current joints."""
+    kept = 0
+    for (lo, hi, _), (outs, cost) in zip(cands, results):
+        b = int(np.argmin(cost))
+        if b > 0:
+            P[lo:hi] = outs[b]
+            kept += 1
+    return kept
 
 
 #: The lean search's passes (:func:`search_leans_lm`): windows of about this many frames over the whole take
@@ -546,9 +555,5 @@ def search_leans_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, windows: tu
             ramp = np.clip(np.minimum(fr - lo + 1, hi - fr) / (margin + 1.0), 0.0, 1.0)
             ramp[(fr >= r[0]) & (fr <= r[-1])] = 1.0
             cands.append((lo, hi, [P] + [leaned(P, fr, np.radians(a) * ramp) for a in angles]))
-        for (lo, hi, _), (outs, cost) in zip(cands, solve_candidates(prob, g, cands, iterations)):
-            b = int(np.argmin(cost))
-            if b > 0:
-                P[lo:hi] = outs[b]
-                kept += 1
+        kept += keep_cheapest(P, cands, solve_candidates(prob, g, cands, iterations))
     return P, kept
