@@ -516,12 +516,16 @@ LEAN_ANGLES = (-16.0, -8.0, 8.0, 16.0)
 LEAN_ITERATIONS = 3
 
 
+#: The joints :func:`leaned` turns: the chest and every joint below it in the tree (spine, head, arms)
+UPPER_BODY = np.array([J["chest"]] + descendants(J["chest"]))
+
+
 def leaned(P: np.ndarray, frames: np.ndarray, angle: np.ndarray) -> np.ndarray:
     """``P`` ``(n, 16, 3)`` (camera frame, metres) with the upper body (the chest and every joint below it in the
     tree: spine, head, arms) on ``frames`` ``(k,)`` turned rigidly about the hips by ``angle`` ``(k,)`` radians around
     the hip line (left hip minus right hip: positive leans the body forwards, towards its front). Every bone keeps
     its length."""
-    upper = np.array([J["chest"]] + descendants(J["chest"]))
+    upper = UPPER_BODY
     axis = unit(P[frames, J["left_hip"]] - P[frames, J["right_hip"]])[:, None]
     root = P[frames, 0][:, None]
     X = P[frames][:, upper] - root
