@@ -59,7 +59,9 @@ def test_mediapipe_node_on_the_sample_matches_the_truth(tmp_path):
     raw = run_node(mediapipe_pose, {"sides": "detector", "offsets": "none", "facing": False}, video=clip)["tracks"]
     assert np.median(np.linalg.norm(raw["points"] - truth2d, axis=-1)[:, 4:]) > 20
     assert "point_offsets" not in raw and "facing" not in raw
-    assert "doubtful" not in t or not t["doubtful"].any()  # its labelled torso faces the camera: nothing doubtful
+    # its labelled torso faces the camera: at most one frame doubtful (measured: none with one Pose over the clip; with
+    # two parts, threads 2, frame 53, where the legs' labels come out wrong with one Pose too)
+    assert "doubtful" not in t or t["doubtful"].astype(bool).sum() <= 1
 
 
 class _Ctx:
@@ -101,6 +103,48 @@ def test_mediapipe_pipeline_runs_on_the_sample_and_beats_mediapipes_3d(tmp_path)
     world = detect_landmarks(_Ctx(), _sample_clip(90), mediapipe_pose.params.model_validate({}))[0].world
     theirs = _pa_limbs_mm(joints16_from_landmarks(world[..., :3] @ MEDIAPIPE_TO_WORLD.T, world[..., 3], MEDIAPIPE_POSE)[0], truth)
     assert ours < 77 and ours < 0.75 * theirs, (ours, theirs)
+
+
+def test_clip_parts_are_consecutive_nearly_equal_and_at_least_30_frames():
+    from tbha_graph.mocap.detect.mediapipe_pose import clip_parts
+
+    assert clip_parts(210, 2) == [(0, 105), (105, 210)]
+    assert clip_parts(90, 4) == [(0, 30), (30, 60), (60, 90)]  # a fourth part would be under 30 frames
+    assert clip_parts(59, 2) == [(0, 59)] and clip_parts(210, 1) == [(0, 210)]
+
+
+def test_mediapipe_threads_run_the_clip_in_parts_at_once(monkeypatch):
+    """threads: 2 runs the sample's 90 frames as two parts, each by its own Pose in its own thread, the second fed from
+    PART_LEAD frames before its first: the first part's landmarks are those of one Pose over the clip bit for bit,
+    the second's within a pixel of them (measured median 0.64 px over frames 45-89)."""
+    require_mediapipe()
+    import threading
+
+    from tbha_graph.mocap.detect import mediapipe_pose as mpp
+
+    clip = _sample_clip(90)
+    one, timing1 = mpp.detect_landmarks(_Ctx(), clip, mpp.mediapipe_pose.params.model_validate({"threads": 1}))
+    opened, fed = [], []
+    open_pose, frames = mpp.open_pose, mpp.prefetched_rgb_frames
+
+    def recorded_open(*args, **kwargs):
+        opened.append(threading.get_ident())
+        return open_pose(*args, **kwargs)
+
+    def recorded_frames(video, depth, start=None, stop=None):
+        fed.append((start, stop))
+        return frames(video, depth, start, stop)
+
+    monkeypatch.setattr(mpp, "open_pose", recorded_open)
+    monkeypatch.setattr(mpp, "prefetched_rgb_frames", recorded_frames)
+    two, timing2 = mpp.detect_landmarks(_Ctx(), clip, mpp.mediapipe_pose.params.model_validate({"threads": 2}))
+    assert timing1["parts"] == 1 and timing2["parts"] == 2 and timing2["frames_run"] == 90
+    assert len(opened) == 2 and opened[0] != opened[1]
+    assert sorted(fed) == [(0, 45), (45 - mpp.PART_LEAD, 90)]
+    np.testing.assert_array_equal(two.image[:45], one.image[:45])
+    np.testing.assert_array_equal(two.world[:45], one.world[:45])
+    diff = np.linalg.norm((two.image[45:, :, :2] - one.image[45:, :, :2]) * [640, 480], axis=-1)
+    assert np.isfinite(two.image[45:]).all() and np.median(diff) < 1.0, np.median(diff)
 
 
 def _suit_tracks(n: int, hidden: slice) -> dict:
