@@ -353,11 +353,11 @@ def _store(result, k: int, image: np.ndarray, world: np.ndarray) -> None:
 def run_parts(ctx, mp_pose, video: VideoClip, p: MediaPipePoseParams, parts: list[tuple[int, int]],
               image: np.ndarray, world: np.ndarray, runs_given: bool = False) -> float:
     """Pose over each of ``parts`` (``[a, b)`` frame ranges of the clip), each by a fresh Pose fed by its own reader
-    (``p.prefetch`` frames ahead) from :data:`PART_LEAD` frames before it (unless it starts the clip or ``runs_given``:
-    the ranges are runs of frames Pose runs on alone), at most ``p.threads`` parts at once in threads (each in a copy of the caller's
-    context: a cancelled run stops them at their next frame); landmarks stored in ``image`` and ``world`` in place
-    (:func:`_store`). One progress bar over every frame run. Returns Pose's own seconds, summed over the parts.
-    An error in one part stops the others and is raised here."""
+    (``p.prefetch`` frames ahead) from :data:`PART_LEAD` frames before it (unless it starts the clip, or
+    ``runs_given``: the ranges are runs that Pose runs on alone), at most ``p.threads`` parts at once in threads
+    (each in a copy of the caller's context: a cancelled run stops them at their next frame); landmarks stored in
+    ``image`` and ``world`` in place (:func:`_store`). One progress bar over every frame run. Returns Pose's own
+    seconds, summed over the parts (lead frames included). An error in one part stops the others and is raised here."""
     import contextvars
     from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 
