@@ -192,3 +192,57 @@ def test_undetected_runs_followed_by_a_detection_are_the_ones_backfilled():
     img[[0, 1, 2, 5, 10, 11]] = np.nan  # 0-2 before the first detection, 5 a gap, 10-11 at the end (nothing after)
     assert _undetected_runs(img) == [(0, 3), (5, 6)]
     assert _undetected_runs(np.zeros((3, 33, 4))) == []
+
+
+class _FakePose:
+    """Stands in for a MediaPipe Pose in the threading tests of ``run_parts``: records the frames it is fed (the blue
+    channel encodes each frame's number, see ``_video``) and raises on frame ``fail_at``."""
+
+    def __init__(self, fed: list, fail_at: int | None):
+        self.fed, self.fail_at = fed, fail_at
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def process(self, rgb):
+        k = int(round(rgb[0, 0, 2] / 20.0))
+        if k == self.fail_at:
+            raise ValueError(f"broken at frame {k}")
+        self.fed.append((threading.get_ident(), k))
+        return type("Result", (), {"pose_landmarks": None, "pose_world_landmarks": None})()
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_run_parts_feeds_each_part_its_frames_and_raises_a_part_s_error(tmp_path, monkeypatch, threads):
+    """run_parts (detect.mediapipe_pose's threads): each part gets its own Pose fed its own frames, a part after the
+    first from PART_LEAD frames early unless the parts are runs; every frame run advances the one progress bar; an
+    error in one part is raised to the caller."""
+    from tbha_graph.mocap.detect import mediapipe_pose as mpp
+
+    clip = _video(tmp_path, n=12)
+    fed: list = []
+    monkeypatch.setattr(mpp, "PART_LEAD", 2)
+    monkeypatch.setattr(mpp, "open_pose", lambda mp_pose, p, static: _FakePose(fed, None))
+    ticks: list = []
+
+    class Ctx:
+        def progress(self, it, total=None, desc=""):
+            for item in it:
+                ticks.append(item)
+                yield item
+
+    p = mpp.mediapipe_pose.params.model_validate({"threads": threads})
+    image, world = np.full((12, 33, 4), np.nan), np.full((12, 33, 4), np.nan)
+    mpp.run_parts(Ctx(), None, clip, p, [(0, 6), (6, 12)], image, world)
+    frames = sorted(k for _, k in fed)
+    assert frames == sorted(list(range(12)) + [4, 5]) and len(ticks) == 12  # the second part from frame 4, its lead not counted
+    assert len({t for t, _ in fed}) == threads
+    fed.clear()
+    mpp.run_parts(Ctx(), None, clip, p, [(0, 3), (8, 12)], image, world, runs_given=True)
+    assert sorted(k for _, k in fed) == [0, 1, 2, 8, 9, 10, 11]  # runs: no lead
+    monkeypatch.setattr(mpp, "open_pose", lambda mp_pose, p, static: _FakePose(fed, 9))
+    with pytest.raises(ValueError, match="frame 9"):
+        mpp.run_parts(Ctx(), None, clip, p, [(0, 6), (6, 12)], image, world)
