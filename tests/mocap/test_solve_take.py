@@ -558,6 +558,26 @@ def test_a_second_side_search_pass_redecides_what_the_first_left_behind(truth):
     assert two < 0.85 * one and two < 28.5  # measured 19.0 vs 26.9 mm
 
 
+def test_side_search_iterations_reach_the_depth_side_search(truth, monkeypatch):
+    """side_search_iterations (pipelines/mediapipe.yaml: 2) is the number of LM steps the depth-side search gives each
+    candidate: every call of the search in a solve gets it."""
+    from tbha_graph.mocap.reconstruct import solve_take as st
+
+    P, uv, _, L = synthetic(truth, 40, start=0)
+    seen = []
+    search = st.search_sides
+
+    def recorded(*args, **kwargs):
+        seen.append(kwargs.get("iterations"))
+        return search(*args, **kwargs)
+
+    monkeypatch.setattr(st, "search_sides", recorded)
+    st.solve_take_arrays(uv, np.ones(uv.shape[:2], bool), L, int(truth["width"]), int(truth["height"]),
+                         float(truth["fps"]), SolveTakeParams(focal_px=700.0, side_search_iterations=2, lean_search=False,
+                                                              max_iterations=3))
+    assert seen and set(seen) == {2}
+
+
 def test_node_takes_the_torso_facing_from_its_keypoints_input_beside_a_suit(truth, monkeypatch):
     """default.yaml gives the suit's tracks (no facing) and MediaPipe's keypoints (with its torso facing, its left
     and right decided by the suit's patches): the node hands the keypoints' facing to the solver, and the tracks'

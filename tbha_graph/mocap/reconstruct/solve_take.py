@@ -181,6 +181,8 @@ class SolveTakeParams(BaseModel):
                                     "x 3 solves (bench/solver_sweep.py --repeats 3) 100.0 / 97.9 mm (ranges 97.2-101.7 / "
                                     "97.1-98.9: within the scatter), the sample 50.9 / 53.2, turning takes 113.1 / 109.9; "
                                     "the solve 55 % slower; hence one by default")
+    side_search_iterations: int = Field(3, ge=1, le=10, description="LM steps each depth-side candidate (a window as it "
+                                        "is and mirrored) gets before their costs are compared")
     sigma_hang: float | None = Field(1.0, gt=0, description="with a silhouette, on frames where only the head is tracked "
                                      "(the actor's back to the camera): each limb bone kept near straight down with this sd "
                                      "(unit vectors; None: off). No limb patch is seen there and the outline alone let the "
@@ -484,7 +486,7 @@ def solve_frames(points, weight, lengths, centre, fps, P0, floor, g_start, p, it
     if side_search:
         g = prob.globals_of(x).copy()
         P = prob.solution(x)[4]
-        P, kept = search_sides(prob, P, g, passes=side_passes)
+        P, kept = search_sides(prob, P, g, iterations=p.side_search_iterations, passes=side_passes)
         if p.lean_search:  # the upper body's lean towards or away from the camera, window by window
             P, leans = search_leans_lm(prob, P, g)
             kept += leans
