@@ -487,12 +487,21 @@ def search_turns_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, mask: np.nd
         cands = []
         for lo, hi, run in wins:
             fr = np.arange(lo, hi)
-            ramp = np.clip(np.minimum(fr - lo + 1, hi - fr) / (min(run[0] - lo, hi - 1 - run[-1]) + 1.0), 0.0, 1.0)
-            ramp[(fr >= run[0]) & (fr <= run[-1])] = 1.0
+            ramp = ramp_in(lo, hi, run, min(run[0] - lo, hi - 1 - run[-1]))
             turns = [mirror_turn(P[fr], prob.d.up) if a == MIRROR else np.full(hi - lo, np.radians(a)) for a in angles]
             cands.append((lo, hi, [P] + [turned(P, fr, prob.d.up, t * ramp) for t in turns]))
         kept += keep_cheapest(P, cands, solve_candidates(prob, g, cands, iterations))
     return P, kept
+
+
+def ramp_in(lo: int, hi: int, run: np.ndarray, width: int) -> np.ndarray:
+    """Weights ``(hi - lo,)`` in [0, 1] of frames ``lo:hi`` for a change made on ``run`` (frames inside it, whole) and
+    ramped in over the margins either side: a margin frame ``k`` frames from the window's edge (1 at the edge) weighs
+    ``k / (width + 1)``."""
+    fr = np.arange(lo, hi)
+    ramp = np.clip(np.minimum(fr - lo + 1, hi - fr) / (width + 1.0), 0.0, 1.0)
+    ramp[(fr >= run[0]) & (fr <= run[-1])] = 1.0
+    return ramp
 
 
 def keep_cheapest(P: np.ndarray, cands: list, results: list) -> int:
@@ -556,8 +565,7 @@ def search_leans_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, windows: tu
         for r in np.array_split(np.arange(n), max(int(round(n / window)), 1)):
             lo, hi = max(int(r[0]) - margin, 0), min(int(r[-1]) + 1 + margin, n)
             fr = np.arange(lo, hi)
-            ramp = np.clip(np.minimum(fr - lo + 1, hi - fr) / (margin + 1.0), 0.0, 1.0)
-            ramp[(fr >= r[0]) & (fr <= r[-1])] = 1.0
+            ramp = ramp_in(lo, hi, r, margin)
             cands.append((lo, hi, [P] + [leaned(P, fr, np.radians(a) * ramp) for a in angles]))
         kept += keep_cheapest(P, cands, solve_candidates(prob, g, cands, iterations))
     return P, kept
