@@ -95,6 +95,65 @@ def test_a_reference_that_knows_the_sides_decides_them_where_the_opening_would_n
     assert all((blind[g] == alone[g]).all() for g in ("arms", "legs"))  # the opening's rule, as without one
 
 
+def _landmarks_turning(n=120, turn=(45, 75), seed=3):
+    """33 image landmarks (px) of a figure that faces the camera, turns its back to it through side-on over the
+    frames ``turn`` and walks on facing away, as a camera above the floor sees it: each left/right pair sits at
+    ``cos(heading)`` of its width from the body's centre line (the person's left on the image's right while
+    facing the camera, on its left once turned), and the toes lie ``20 cos(heading)`` px below the heels (above
+    them from behind). Returns the landmarks with the true labels and the detector's, which always puts the
+    person's left on the image's right (taking the figure to face the camera all along)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n)
+    c = np.cos(np.pi * np.clip((t - turn[0]) / (turn[1] - turn[0]), 0.0, 1.0))  # 1 facing -> -1 away
+    cx = 320 + 0.5 * t
+    true = np.zeros((n, MEDIAPIPE_POSE.size, 2))
+    seen = np.zeros_like(true)
+    for name in MEDIAPIPE_POSE.landmarks:
+        k = MEDIAPIPE_POSE.index(name)
+        side = 1.0 if "left" in name else (-1.0 if "right" in name else 0.0)
+        part = name.split("_", 1)[-1]
+        width = {"shoulder": 40, "elbow": 60, "wrist": 70, "hip": 22, "knee": 24, "ankle": 25, "heel": 25,
+                 "foot_index": 25}.get(part, 8)
+        height = {"shoulder": 150, "elbow": 190, "wrist": 230, "hip": 270, "knee": 350, "ankle": 430, "heel": 435,
+                  "foot_index": 435}.get(part, 110)
+        true[:, k, 0] = cx + side * width * c
+        seen[:, k, 0] = cx + side * width * np.abs(c)
+        true[:, k, 1] = seen[:, k, 1] = height + (20.0 * c if part == "foot_index" else 0.0)
+    noise = rng.normal(0, 0.5, true.shape)
+    return true + noise, seen + noise
+
+
+def test_the_feet_tell_a_turn_to_the_back_from_a_detector_that_keeps_the_figure_facing_the_camera():
+    """Continuity alone cannot see the turn: the detector's labels bounce off the centre line where the true
+    ones cross it, moving as little. The toes above the heels after the turn make the labels turn with the
+    figure; with the feet's cue off they stay as the detector gave them."""
+    from tbha_graph.mocap.detect.left_right import feet_facing_cost
+
+    true, seen = _landmarks_turning()
+    n = len(true)
+    got = consistent_sides(seen, np.ones(n, bool))
+    limbs = [MEDIAPIPE_POSE.index(f"{side}_{part}") for side in ("left", "right")
+             for part in ("shoulder", "elbow", "wrist", "hip", "knee", "ankle")]
+    fixed = apply_sides(seen, {g: got[g] for g in ("arms", "legs")})
+    off = np.abs(fixed[:, limbs] - true[:, limbs]).max(axis=(1, 2))
+    assert off.max() < 3.0  # measured 0.0 (the same noise on both): every frame's labels as the figure's
+    assert got["arms"][80:].all() and got["legs"][80:].all() and not got["arms"][:40].any()
+    blind = consistent_sides(seen, np.ones(n, bool), feet_weight=0.0)
+    for g in ("arms", "legs"):  # the detector's labels, wrong after the turn (side-on, frame 60, either way)
+        assert not blind[g][:55].any() and not blind[g][65:].any(), g
+    # the cue itself: nothing side-on or without feet in the layout; facing the camera costs the swapped states
+    cost = feet_facing_cost(seen, MEDIAPIPE_POSE)
+    assert cost.shape == (n, 4) and (cost.min(axis=1) == 0).all()
+    assert cost[10, 3] > 0 and cost[10, 0] == 0 and cost[110, 0] > 0 and cost[110, 3] == 0
+    assert np.abs(cost[60]).max() < 0.2 * np.abs(cost[10]).max()
+    assert feet_facing_cost(seen, MEDIAPIPE_POSE, weight=0.0) is None
+    # toes a few pixels off the heels (a stride, a camera at hip height) are inside the dead zone: no cost
+    flat = seen.copy()
+    for k in ("left_foot_index", "right_foot_index"):
+        flat[:, MEDIAPIPE_POSE.index(k), 1] = flat[:, MEDIAPIPE_POSE.index("left_heel"), 1] + 6.0  # 5 % of the 120 px torso
+    assert (feet_facing_cost(flat, MEDIAPIPE_POSE) == 0).all()
+
+
 def test_undetected_frames_are_skipped_and_pairs_cover_every_side():
     lm = _landmarks_walking()
     bad, truth = _swap_stretches(lm, [(40, 80)])

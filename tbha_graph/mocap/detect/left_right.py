@@ -27,6 +27,13 @@ from ..io.keypoint_layouts import MEDIAPIPE_POSE, Layout
 
 #: the groups of mirror pairs whose labels are decided together
 GROUPS = ("arms", "legs", "face")
+#: :func:`feet_facing_cost`: path cost (pixels) per pixel the toes lie below the heels (or above them) beyond
+#: ``FEET_DEAD`` x the torso's image length, at most ``FEET_CAP`` x it, for a state whose labels face the other way;
+#: a state's facing is ``tanh(labelled torso width / (FEET_WIDTH_SCALE x torso length))`` (0 side-on)
+FEET_WEIGHT = 2.0
+FEET_DEAD = 0.1
+FEET_CAP = 0.2
+FEET_WIDTH_SCALE = 0.1
 
 
 def mirror_pairs(layout: Layout) -> dict[str, list[tuple[int, int]]]:
@@ -85,9 +92,46 @@ def _anchor_cost(S: np.ndarray, R: np.ndarray) -> np.ndarray:
     return d - d.min(axis=1, keepdims=True)
 
 
+def feet_facing_cost(P: np.ndarray, layout: Layout, weight: float = FEET_WEIGHT) -> np.ndarray | None:
+    """``(m, 4)`` cost of each arms x legs state (``2 * arms_swapped + legs_swapped``) from the feet, or None when
+    the layout has no heels and toes. ``P`` ``(m, L, 2)`` image landmarks in pixels (y down).
+
+    Feet point forwards, and a camera above the floor sees the nearer end of a foot lower in the image: the toes
+    below the heels when the person faces the camera, above them with the back to it. Which way the person faces
+    is thus read without the labels (the mean of both feet's toe-minus-heel image height does not change when left
+    and right are exchanged), and a state whose labelled torso (the person's left on the image's right = facing
+    the camera) faces the other way pays ``weight`` x that offset beyond a dead zone of :data:`FEET_DEAD` x the
+    torso's image length (a foot lifted in a stride, a camera at hip height: a few pixels either way), capped at
+    :data:`FEET_CAP` x it, times how squarely the state faces (``tanh`` of the labelled shoulder plus hip width
+    over :data:`FEET_WIDTH_SCALE` x the torso length: side-on, nothing). The detector's own heels and toes carry
+    its idea of the facing too, but less than its labels do. On ``bench/mediapipe_sides.py``'s seven renders
+    (MediaPipe's 33 landmarks against the truth's joints) the frames with the arms' / legs' labels wrong went
+    from 339 to 29 (the fast spin 83 / 83 -> 1 / 1, 131_01's low camera 73 / 77 -> 8 / 5, the hop 7 / 6 -> 1 / 3,
+    the others unchanged). How far that holds: without the dead zone (or with 0.03-0.06) the spin and the hop
+    are fixed but 131_01 only to 64 / 59, and the sample's first 90 frames (its walk towards the camera, toes
+    3-5 px above the heels in mid-stride) went wrong for 19 frames; dead zones 0.08-0.12 with weight 2-4 all
+    give the 29, weight 1 gives 138."""
+    names = ("left_foot_index", "right_foot_index", "left_heel", "right_heel", "left_shoulder", "right_shoulder",
+             "left_hip", "right_hip")
+    if weight <= 0 or not all(k in layout.landmarks for k in names):
+        return None
+    lt, rt, lh, rh, ls, rs, lp, rp = (P[:, layout.index(k)] for k in names)
+    torso = np.linalg.norm((ls + rs - lp - rp) / 2.0, axis=-1)
+    torso = np.nan_to_num(torso, nan=np.nanmedian(torso) if np.isfinite(torso).any() else 1.0)
+    toes_below = np.nan_to_num((lt[:, 1] + rt[:, 1] - lh[:, 1] - rh[:, 1]) / 2.0)
+    toes_below = np.sign(toes_below) * np.clip(np.abs(toes_below) - FEET_DEAD * torso, 0.0, (FEET_CAP - FEET_DEAD) * torso)
+    sdx, hdx = ls[:, 0] - rs[:, 0], lp[:, 0] - rp[:, 0]
+    out = np.zeros((P.shape[0], 4))
+    for a in (0, 1):
+        for leg in (0, 1):
+            facing = np.tanh(np.nan_to_num(sdx * (1 - 2 * a) + hdx * (1 - 2 * leg)) / np.maximum(FEET_WIDTH_SCALE * torso, 1e-6))
+            out[:, 2 * a + leg] = -weight * facing * toes_below
+    return out - out.min(axis=1, keepdims=True)
+
+
 def consistent_sides(points: np.ndarray, detected: np.ndarray, layout: Layout = MEDIAPIPE_POSE,
                      start: str = "facing_camera", coupling: float = 2.0,
-                     reference: np.ndarray | None = None) -> dict[str, np.ndarray]:
+                     reference: np.ndarray | None = None, feet_weight: float = FEET_WEIGHT) -> dict[str, np.ndarray]:
     """Per group (:func:`mirror_pairs`) a bool ``(n,)``: True where the detector's left/right labels are to be
     swapped. ``points`` ``(n, L, 2)`` image landmarks (any unit), ``detected`` ``(n,)`` bool (frames without a
     detection are skipped: the path continues across them).
@@ -98,10 +142,12 @@ def consistent_sides(points: np.ndarray, detected: np.ndarray, layout: Layout = 
     turned by half a turn) costs ``coupling`` x the smaller of the two widths in pixels; side-on (one width
     near 0) costs nothing. The face is decided on its own.
 
-    Measured on the renders (frames with the arms' / legs' labels still wrong, of 99-210): the sample 1 / 0,
-    131_02 far 1 / 1, 131_03 hop 1 / 2, 131_01 low camera 72 / 78 (MediaPipe misses its T-pose and flips
-    its labels every few frames while the actor stands facing it); on the turning renders of the offsets fit
-    0 / 0, 0 / 4 and 80 / 83 (131_03's fast spin: a whole turn in about a second). Without the coupling the
+    Measured on the renders (frames with the arms' / legs' labels still wrong, of 99-210, ``python
+    bench/mediapipe_sides.py``): the sample 1 / 1, 131_02 far 0 / 2, 131_03 hop 0 / 3, 131_01 low camera 7 / 4
+    (MediaPipe misses its T-pose and flips its labels every few frames while the actor stands facing it); on the
+    turning renders of the offsets fit 0 / 0, 0 / 4 and 0 / 1 (131_03's fast spin: a whole turn in about a
+    second). Before the feet's cue (round 23) 131_01 was 72 / 78 and the spin 80 / 83: continuity alone cannot
+    tell a detector that turns its labels round gradually from a person who turns. Without the coupling the
     legs of the far and the hop takes went wrong for 70-100 frames. A prior for facing the camera fixed
     half of 131_01's frames but broke the turning takes (60+ frames each), so there is none; neither is a cost on
     the labelled torso width jumping between frames (round 11: weight 3 fixed half of 131_01 and broke the hop,
@@ -150,6 +196,9 @@ def consistent_sides(points: np.ndarray, detected: np.ndarray, layout: Layout = 
     if ref is None or not np.isfinite(ref).any():
         fa, fl = first_cost(Sa), first_cost(Sl)
         unary[0] += (fa[:, None] + fl[None, :]).reshape(4)
+        feet = feet_facing_cost(P, layout, feet_weight)  # only without a reference: with a suit's patches the
+        if feet is not None:  # wrong groups of the fifteen suit renders went 20 / 26 -> 21 / 32 with it (no dead zone)
+            unary += feet
     else:  # the reference decides where it knows the sides, instead of the opening's facing
         ca, cl = (_anchor_cost(S, _group_states(ref, pairs[g])[:, 0]) for S, g in ((Sa, "arms"), (Sl, "legs")))
         unary += (ca[:, :, None] + cl[:, None, :]).reshape(m, 4)

