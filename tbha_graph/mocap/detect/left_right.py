@@ -140,7 +140,8 @@ def consistent_sides(points: np.ndarray, detected: np.ndarray, layout: Layout = 
     besides how far each group's landmarks move, a frame whose shoulders and hips face opposite ways (the
     labelled left shoulder right of the right one while the left hip is left of the right one: a torso
     turned by half a turn) costs ``coupling`` x the smaller of the two widths in pixels; side-on (one width
-    near 0) costs nothing. The face is decided on its own.
+    near 0) costs nothing; without a ``reference``, a frame whose labels face the other way than the feet show
+    costs :func:`feet_facing_cost` (``feet_weight``; 0: none). The face is decided on its own.
 
     Measured on the renders (frames with the arms' / legs' labels still wrong, of 99-210, ``python
     bench/mediapipe_sides.py``): the sample 1 / 1, 131_02 far 0 / 2, 131_03 hop 0 / 3, 131_01 low camera 7 / 4
