@@ -253,6 +253,70 @@ def test_undetected_runs_followed_by_a_detection_are_the_ones_backfilled():
     assert _undetected_runs(np.zeros((3, 33, 4))) == []
 
 
+
+class _TrackingPose:
+    """A stand-in MediaPipe Pose in video mode for the backfill test: frame ``k`` (its blue channel / 10) is found
+    when the pose is being tracked (a frame before found it) or newly detected (``k`` not in ``missed``), and lost on
+    ``lost`` frames whatever came before."""
+
+    def __init__(self, missed: set, lost: set, fed: list):
+        self.missed, self.lost, self.fed, self.tracking = missed, lost, fed, False
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def process(self, rgb):
+        k = int(round(rgb[0, 0, 2] / 10.0))
+        self.fed.append(k)
+        self.tracking = k not in self.lost and (self.tracking or k not in self.missed)
+        mark = [type("Landmark", (), {"x": float(k), "y": 0.0, "z": 0.0, "visibility": 1.0})()] * 33
+        lms = type("Landmarks", (), {"landmark": mark})() if self.tracking else None
+        return type("Result", (), {"pose_landmarks": lms, "pose_world_landmarks": lms})()
+
+
+def test_backfill_beside_the_parts_tracks_every_missed_run_backwards_once(tmp_path, monkeypatch):
+    """Runs a part finds inside itself (frame b found after missed frames [a, b)) are tracked backwards as soon as it
+    finds them (Backfill.submit, beside the parts); runs across the cut between parts after the parts, from the
+    forward detections alone; a backward tracker that loses the pose stops there."""
+    from tbha_graph.mocap.detect import mediapipe_pose as mpp
+
+    path = tmp_path / "v.avi"
+    w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (64, 48))
+    for i in range(24):
+        img = np.zeros((48, 64, 3), np.uint8)
+        img[:, :, 0] = 10 * i  # blue channel: the frame's number
+        w.write(img)
+    w.release()
+    clip = probe_video(path)
+    # part 0 = [0, 12): misses 0-3 (the opening), loses 7 and 11; part 1 = [12, 24) from 10: misses 10-12
+    missed, lost, fed = {0, 1, 2, 3, 10, 11, 12}, {7, 11}, []
+    monkeypatch.setattr(mpp, "PART_LEAD", 2)
+    monkeypatch.setattr(mpp, "open_pose", lambda *a, **k: _TrackingPose(missed, lost, fed))
+
+    class Ctx:
+        def progress(self, it, total=None, desc=""):
+            yield from it
+
+    p = mpp.mediapipe_pose.params.model_validate({"threads": 2})
+    image, world = np.full((24, 33, 4), np.nan), np.full((24, 33, 4), np.nan)
+    backfill = mpp.Backfill(None, clip, p, image, world)
+    try:
+        mpp.run_parts(Ctx(), None, clip, p, [(0, 12), (12, 24)], image, world, on_missed=backfill.submit)
+        assert set(backfill.started) == {(0, 4), (7, 8)}  # inside part 0; [11, 13) crosses the cut
+        filled = backfill.finish()
+    finally:
+        backfill.close()
+    found = np.flatnonzero(~np.isnan(image).all(axis=(1, 2)))
+    # 0-3 tracked back from 4; 7 lost again going back from 8; 12 tracked back from 13, then 11 lost
+    assert found.tolist() == [k for k in range(24) if k not in (7, 11)] and filled == 5
+    np.testing.assert_array_equal(image[found, 0, 0], found)  # each frame's own landmarks
+    # frame b, then b-1 ... down to a (or to where the pose was lost), for each run
+    assert fed.count(4) == 2 and fed.count(8) == 2 and fed.count(13) == 2 and fed.count(12) == 2
+    assert fed.count(11) == 3  # part 0, part 1's lead, and going back from 13
+
 class _FakePose:
     """Stands in for a MediaPipe Pose in the threading tests of ``run_parts``: records the frames it is fed (the blue
     channel encodes each frame's number, see ``_video``) and raises on frame ``fail_at``."""

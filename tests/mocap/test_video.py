@@ -9,7 +9,8 @@ from pydantic import ValidationError
 from tbha_graph.core.errors import NodeError
 from tbha_graph.core.testing import run_node
 from tbha_graph.core.types import hash_file
-from tbha_graph.mocap.io.video import iter_frames, video
+from tbha_graph.mocap.io import video as video_module
+from tbha_graph.mocap.io.video import iter_frames, iter_frames_at, video
 from tbha_graph.mocap.segment.testframes import write_video
 
 W, H, N = 128, 64, 24
@@ -58,6 +59,23 @@ def test_range_and_downscale(coded_mp4):
     # a stop beyond the end is clamped to the end
     assert run_node(video, {"path": str(coded_mp4), "stop": 1000})["video"].stop == N
 
+
+
+@pytest.mark.parametrize("gap", [0, 3, 100])
+def test_frames_at_given_indices_are_the_streamed_ones(coded_mp4, monkeypatch, gap):
+    """iter_frames_at (the room's background samples): the frames iter_frames gives at those indices, whether reached
+    by decoding through (gaps up to SEEK_GAP) or by seeking; indices must be sorted and inside the clip."""
+    monkeypatch.setattr(video_module, "SEEK_GAP", gap)  # 0: every frame seeked, 100: decoded through
+    clip = run_node(video, {"path": str(coded_mp4), "start": 2, "stop": 22, "scale": 0.5})["video"]
+    streamed = dict(iter_frames(clip))
+    picks = [2, 3, 7, 8, 15, 21]
+    got = list(iter_frames_at(clip, picks))
+    assert [i for i, _ in got] == picks and [_decode(f) for _, f in got] == picks
+    for i, f in got:
+        np.testing.assert_array_equal(f, streamed[i])
+    for bad in ([3, 2], [1, 5], [5, 22]):
+        with pytest.raises(ValueError, match="sorted, unique and within 2..21"):
+            list(iter_frames_at(clip, bad))
 
 def test_missing_path_names_the_file(tmp_path):
     path = tmp_path / "nope.mp4"
@@ -112,3 +130,5 @@ def test_decoding_failure_names_the_frame(tmp_path):
         for i, _ in iter_frames(clip):
             seen.append(i)
     assert f"frame {len(seen)}" in str(e.value) and 0 < len(seen) < 20
+    with pytest.raises(NodeError, match=r"cut.avi: decoding failed at frame \d+ \(on the way to frame 19\)"):
+        list(iter_frames_at(clip, [0, 19]))  # decoded through: the first frame that fails is named

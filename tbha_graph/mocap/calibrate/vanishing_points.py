@@ -38,7 +38,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from ...core.atomic import atomic_write_bytes
 from ...core.node import checkpoint, node
 from ..bundles.lens import LensEstimate
-from ..io.video import iter_frames
+from ..io.video import iter_frames_at
 from ..ports import IMAGE, LENS, REPORT, VIDEO
 
 #: BGR colours of the two families that gave the focal length, then of the others
@@ -66,14 +66,14 @@ class VanishingParams(BaseModel):
 
 
 def median_background(clip, samples: int, progress=None) -> np.ndarray:
-    """Per-pixel median ``(H, W, 3)`` uint8 of ``samples`` frames spread evenly over ``clip`` (each one seeked);
+    """Per-pixel median ``(H, W, 3)`` uint8 of ``samples`` frames spread evenly over ``clip`` (:func:`iter_frames_at`);
     ``progress`` (optional) wraps the frames' iterable as ``ctx.progress`` does (shown, and an interrupted run
     stops at the next frame)."""
     picks = np.unique(np.linspace(clip.start, clip.stop - 1, min(samples, clip.n_frames)).round().astype(int))
+    frames = iter_frames_at(clip, picks)
     if progress is not None:
-        picks = progress(picks, total=len(picks), desc="room background")
-    frames = [frame for i in picks for _, frame in iter_frames(clip, int(i), int(i) + 1)]
-    return np.median(np.stack(frames), axis=0).astype(np.uint8)
+        frames = progress(frames, total=len(picks), desc="room background")
+    return np.median(np.stack([frame for _, frame in frames]), axis=0).astype(np.uint8)
 
 
 def line_segments(image: np.ndarray, min_length_px: float, subpixel: bool = True) -> np.ndarray:

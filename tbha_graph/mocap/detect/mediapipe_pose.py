@@ -337,10 +337,14 @@ def detect_landmarks(ctx, video: VideoClip, p: MediaPipePoseParams,
     t0 = time.perf_counter()
     parts = clip_parts(n, p.threads) if runs is None else list(runs)
     ran = sum(b - a for a, b in parts)
-    detect_s = run_parts(ctx, mp_pose, video, p, parts, image, world, runs is not None)
-    backfilled = 0
-    if runs is None and p.backfill and not p.static_image_mode:
-        backfilled = _backfill(mp_pose, video, p, image, world)
+    backfill = Backfill(mp_pose, video, p, image, world) if runs is None and p.backfill and not p.static_image_mode else None
+    try:
+        detect_s = run_parts(ctx, mp_pose, video, p, parts, image, world, runs is not None,
+                             on_missed=None if backfill is None else backfill.submit)
+        backfilled = 0 if backfill is None else backfill.finish()
+    finally:
+        if backfill is not None:
+            backfill.close()
     wall = time.perf_counter() - t0
     timing = {"backfilled_frames": backfilled, "frames_run": ran, "parts": len(parts),
               "detect_ms_per_frame": 1000.0 * detect_s / max(ran, 1), "wall_ms_per_frame": 1000.0 * wall / max(ran, 1)}
@@ -356,13 +360,16 @@ def _store(result, k: int, image: np.ndarray, world: np.ndarray) -> None:
 
 
 def run_parts(ctx, mp_pose, video: VideoClip, p: MediaPipePoseParams, parts: list[tuple[int, int]],
-              image: np.ndarray, world: np.ndarray, runs_given: bool = False) -> float:
+              image: np.ndarray, world: np.ndarray, runs_given: bool = False, on_missed=None) -> float:
     """Pose over each of ``parts`` (``[a, b)`` frame ranges of the clip), each by a fresh Pose fed by its own reader
     (``p.prefetch`` frames ahead) from :data:`PART_LEAD` frames before it (unless it starts the clip, or
     ``runs_given``: the ranges are runs that Pose runs on alone), at most ``p.threads`` parts at once in threads
     (each in a copy of the caller's context: a cancelled run stops them at their next frame); landmarks stored in
-    ``image`` and ``world`` in place (:func:`_store`). One progress bar over every frame run. Returns Pose's own
-    seconds, summed over the parts (lead frames included). An error in one part stops the others and is raised here."""
+    ``image`` and ``world`` in place (:func:`_store`). One progress bar over every frame run. ``on_missed(a, b)``
+    (optional) is called, from the part's thread, as soon as a part detects frame ``b`` after missing frames
+    ``[a, b)`` that lie inside it (a run reaching back to the start of a part after the first is left to the caller:
+    the previous part may have missed its end too). Returns Pose's own seconds, summed over the parts (lead frames
+    included). An error in one part stops the others and is raised here."""
     import contextvars
     from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 
@@ -375,6 +382,7 @@ def run_parts(ctx, mp_pose, video: VideoClip, p: MediaPipePoseParams, parts: lis
         spent = 0.0
         lead = 0 if part[0] == 0 or runs_given else PART_LEAD  # a run starts where its frames start
         frames = prefetched_rgb_frames(video, p.prefetch, video.start + part[0] - lead, video.start + part[1])
+        missed_from = None  # first frame of the current run of missed frames
         try:
             with open_pose(mp_pose, p, p.static_image_mode) as pose:
                 for index, rgb in frames:
@@ -383,9 +391,16 @@ def run_parts(ctx, mp_pose, video: VideoClip, p: MediaPipePoseParams, parts: lis
                     t1 = time.perf_counter()
                     result = pose.process(rgb)
                     spent += time.perf_counter() - t1
-                    if index - video.start < part[0]:
+                    k = index - video.start
+                    if k < part[0]:
                         continue
-                    _store(result, index - video.start, image, world)
+                    _store(result, k, image, world)
+                    if result.pose_landmarks is None:
+                        missed_from = k if missed_from is None else missed_from
+                    elif missed_from is not None:
+                        if on_missed is not None and (missed_from > part[0] or part[0] == 0):
+                            on_missed(missed_from, k)
+                        missed_from = None
                     with lock:
                         next(bar, None)
         finally:
@@ -476,24 +491,61 @@ def _undetected_runs(image: np.ndarray) -> list[tuple[int, int]]:
     return runs
 
 
-def _backfill(mp_pose, video: VideoClip, p: "MediaPipePoseParams", image: np.ndarray, world: np.ndarray) -> int:
-    """Frames MediaPipe missed going forward, tracked backwards from the detected frame after them (a fresh
-    Pose in video mode fed ``b, b-1, ..., a``): its detector can miss a pose its tracker then follows (on a
-    render with a low camera it missed the whole opening T-pose, which the solver needs). Fills ``image``
-    and ``world`` in place; returns the number of frames filled."""
-    filled = 0
-    for a, b in _undetected_runs(image):
-        frames = [rgb for _, rgb in prefetched_rgb_frames(video, 0, video.start + a, video.start + b + 1)]
-        with open_pose(mp_pose, p, static_image_mode=False) as pose:
-            for k in range(len(frames) - 1, -1, -1):
-                res = pose.process(frames[k])
-                if res.pose_landmarks is None:
-                    break  # lost going backwards too: the earlier frames stay undetected
-                if k == len(frames) - 1:
-                    continue  # frame b itself: detected going forward already
-                _store(res, a + k, image, world)
-                filled += 1
+def _backfill_run(mp_pose, video: VideoClip, p: "MediaPipePoseParams", a: int, b: int, image: np.ndarray,
+                  world: np.ndarray) -> list[int]:
+    """Frames ``[a, b)`` that MediaPipe missed going forward, tracked backwards from the detected frame ``b`` after
+    them (a fresh Pose in video mode fed ``b, b-1, ..., a``): its detector can miss a pose its tracker then follows
+    (on a render with a low camera it missed the whole opening T-pose, which the solver needs). Fills ``image`` and
+    ``world`` in place; returns the frames filled (from ``b - 1`` down to where the tracker lost the pose, if it did)."""
+    frames = [rgb for _, rgb in prefetched_rgb_frames(video, 0, video.start + a, video.start + b + 1)]
+    filled = []
+    with open_pose(mp_pose, p, static_image_mode=False) as pose:
+        for k in range(len(frames) - 1, -1, -1):
+            res = pose.process(frames[k])
+            if res.pose_landmarks is None:
+                break  # lost going backwards too: the earlier frames stay undetected
+            if k == len(frames) - 1:
+                continue  # frame b itself: detected going forward already
+            _store(res, a + k, image, world)
+            filled.append(a + k)
     return filled
+
+
+class Backfill:
+    """Every run of frames missed going forward, tracked backwards (:func:`_backfill_run`): each run a part finds
+    inside itself is started at once in a thread of its own (:meth:`submit`, the parts' ``on_missed``), beside the
+    parts still detecting, so the clip's cores stay busy; :meth:`finish` waits for those and then runs the others
+    (runs across a cut between parts), as found on the forward detections alone. The landmarks are those of running
+    every run after all the parts."""
+
+    def __init__(self, mp_pose, video: VideoClip, p: "MediaPipePoseParams", image: np.ndarray, world: np.ndarray):
+        from concurrent.futures import ThreadPoolExecutor
+
+        self.args = (mp_pose, video, p)
+        self.image, self.world = image, world
+        self.pool = ThreadPoolExecutor(max(1, p.threads), thread_name_prefix="mediapipe-backfill")
+        self.started: dict[tuple[int, int], object] = {}
+        self.lock = threading.Lock()
+
+    def submit(self, a: int, b: int) -> None:
+        import contextvars
+
+        with self.lock:
+            self.started[(a, b)] = self.pool.submit(contextvars.copy_context().run, _backfill_run, *self.args, a, b,
+                                                    self.image, self.world)
+
+    def finish(self) -> int:
+        """Waits for the runs started, runs the rest; returns the number of frames filled."""
+        filled = [k for f in list(self.started.values()) for k in f.result()]
+        forward = self.image.copy()  # the forward detections alone: the filled frames missed again
+        forward[filled] = np.nan
+        for a, b in _undetected_runs(forward):
+            if (a, b) not in self.started:
+                filled += _backfill_run(*self.args, a, b, self.image, self.world)
+        return len(filled)
+
+    def close(self) -> None:
+        self.pool.shutdown(wait=True, cancel_futures=True)
 
 
 @node("detect.mediapipe_pose", version=9,
