@@ -277,6 +277,18 @@ class _TrackingPose:
         return type("Result", (), {"pose_landmarks": lms, "pose_world_landmarks": lms})()
 
 
+@pytest.mark.parametrize("chunk", [1, 3, 32])
+def test_frames_backwards_are_the_forward_frames_reversed(tmp_path, monkeypatch, chunk):
+    from tbha_graph.mocap.detect import mediapipe_pose as mpp
+
+    clip = _video(tmp_path, n=12)
+    monkeypatch.setattr(mpp, "BACKWARDS_CHUNK", chunk)
+    forward = dict(prefetched_rgb_frames(clip, 0))
+    got = list(mpp.backwards_rgb_frames(clip, 2, 10))
+    assert [k for k, _ in got] == list(range(9, 1, -1))
+    for k, rgb in got:
+        np.testing.assert_array_equal(rgb, forward[k])
+
 def test_backfill_beside_the_parts_tracks_every_missed_run_backwards_once(tmp_path, monkeypatch):
     """Runs a part finds inside itself (frame b found after missed frames [a, b)) are tracked backwards as soon as it
     finds them (Backfill.submit, beside the parts); runs across the cut between parts after the parts, from the
@@ -294,6 +306,7 @@ def test_backfill_beside_the_parts_tracks_every_missed_run_backwards_once(tmp_pa
     # part 0 = [0, 12): misses 0-3 (the opening), loses 7 and 11; part 1 = [12, 24) from 10: misses 10-12
     missed, lost, fed = {0, 1, 2, 3, 10, 11, 12}, {7, 11}, []
     monkeypatch.setattr(mpp, "PART_LEAD", 2)
+    monkeypatch.setattr(mpp, "BACKWARDS_CHUNK", 3)  # the opening's run read back in two chunks
     monkeypatch.setattr(mpp, "open_pose", lambda *a, **k: _TrackingPose(missed, lost, fed))
 
     class Ctx:
@@ -316,6 +329,10 @@ def test_backfill_beside_the_parts_tracks_every_missed_run_backwards_once(tmp_pa
     # frame b, then b-1 ... down to a (or to where the pose was lost), for each run
     assert fed.count(4) == 2 and fed.count(8) == 2 and fed.count(13) == 2 and fed.count(12) == 2
     assert fed.count(11) == 3  # part 0, part 1's lead, and going back from 13
+    fed.clear()  # a run abandoned (Backfill.close on an error or a cancelled run) stops at its next frame
+    stop = threading.Event()
+    stop.set()
+    assert mpp._backfill_run(None, clip, p, 0, 4, image, world, stop) == [] and fed == []
 
 class _FakePose:
     """Stands in for a MediaPipe Pose in the threading tests of ``run_parts``: records the frames it is fed (the blue

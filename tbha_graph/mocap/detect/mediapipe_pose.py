@@ -492,23 +492,39 @@ def _undetected_runs(image: np.ndarray) -> list[tuple[int, int]]:
 
 
 def _backfill_run(mp_pose, video: VideoClip, p: "MediaPipePoseParams", a: int, b: int, image: np.ndarray,
-                  world: np.ndarray) -> list[int]:
+                  world: np.ndarray, stop: threading.Event | None = None) -> list[int]:
     """Frames ``[a, b)`` that MediaPipe missed going forward, tracked backwards from the detected frame ``b`` after
     them (a fresh Pose in video mode fed ``b, b-1, ..., a``): its detector can miss a pose its tracker then follows
     (on a render with a low camera it missed the whole opening T-pose, which the solver needs). Fills ``image`` and
-    ``world`` in place; returns the frames filled (from ``b - 1`` down to where the tracker lost the pose, if it did)."""
-    frames = [rgb for _, rgb in prefetched_rgb_frames(video, 0, video.start + a, video.start + b + 1)]
+    ``world`` in place; returns the frames filled (from ``b - 1`` down to where the tracker lost the pose, if it did,
+    or to where ``stop`` was set: the run is being abandoned)."""
     filled = []
     with open_pose(mp_pose, p, static_image_mode=False) as pose:
-        for k in range(len(frames) - 1, -1, -1):
-            res = pose.process(frames[k])
+        for k, rgb in backwards_rgb_frames(video, a, b + 1):
+            if stop is not None and stop.is_set():
+                break
+            res = pose.process(rgb)
             if res.pose_landmarks is None:
                 break  # lost going backwards too: the earlier frames stay undetected
-            if k == len(frames) - 1:
+            if k == b:
                 continue  # frame b itself: detected going forward already
-            _store(res, a + k, image, world)
-            filled.append(a + k)
+            _store(res, k, image, world)
+            filled.append(k)
     return filled
+
+
+#: Frames decoded at a time by :func:`backwards_rgb_frames` (its memory: 0.9 MB a frame at 640x480)
+BACKWARDS_CHUNK = 32
+
+
+def backwards_rgb_frames(video: VideoClip, a: int, b: int) -> Iterator[tuple[int, np.ndarray]]:
+    """``(k, rgb frame)`` for the clip's frames ``k`` = ``b - 1`` down to ``a``, decoded :data:`BACKWARDS_CHUNK` at a
+    time (each chunk from a seek, then reversed), so a long run holds one chunk in memory, not the run."""
+    for hi in range(b, a, -BACKWARDS_CHUNK):
+        lo = max(a, hi - BACKWARDS_CHUNK)
+        chunk = list(prefetched_rgb_frames(video, 0, video.start + lo, video.start + hi))
+        for index, rgb in reversed(chunk):
+            yield index - video.start, rgb
 
 
 class Backfill:
@@ -526,13 +542,14 @@ class Backfill:
         self.pool = ThreadPoolExecutor(max(1, p.threads), thread_name_prefix="mediapipe-backfill")
         self.started: dict[tuple[int, int], object] = {}
         self.lock = threading.Lock()
+        self.stop = threading.Event()  # set by close(): runs still going stop at their next frame
 
     def submit(self, a: int, b: int) -> None:
         import contextvars
 
         with self.lock:
             self.started[(a, b)] = self.pool.submit(contextvars.copy_context().run, _backfill_run, *self.args, a, b,
-                                                    self.image, self.world)
+                                                    self.image, self.world, self.stop)
 
     def finish(self) -> int:
         """Waits for the runs started, runs the rest; returns the number of frames filled."""
@@ -545,6 +562,8 @@ class Backfill:
         return len(filled)
 
     def close(self) -> None:
+        """Stops the runs still going (an error or a cancelled run: at their next frame) and their threads."""
+        self.stop.set()
         self.pool.shutdown(wait=True, cancel_futures=True)
 
 
