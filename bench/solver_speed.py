@@ -27,6 +27,7 @@ sys.path.insert(0, str(ROOT))
 from tbha_graph.core.cache import Cache  # noqa: E402
 from tbha_graph.core.runner import load_graph, run_graph  # noqa: E402
 from tbha_graph.mocap.body import body_lengths  # noqa: E402
+from tbha_graph.mocap.bundles.lens import LensEstimate  # noqa: E402,F401 - named in an annotation
 from tbha_graph.mocap.reconstruct.solve_take import SolveTakeParams, silhouette_field, solve_take_arrays  # noqa: E402
 
 
