@@ -20,7 +20,12 @@ node does, the first as they are and the others with Gaussian noise of ``--jitte
 added, and prints the solver's own joints' PA-MPJPE over them (before the pipeline's smoothing, every frame):
 ``solver_pa_mpjpe_mm_mean`` / ``_min`` / ``_max`` and ``ratio_mean`` (MediaPipe's over that mean).
 
-    python bench/mediapipe_compare.py [--takes sample,hop131_03_f1000_high] [--set NODE.PARAM=VALUE ...] [--repeats 5]
+``--ceiling`` also solves the render's true 2D joints in MediaPipe's place (every joint tracked, confidence 1, no
+landmark offsets; MediaPipe's torso facing kept) the way the pipeline solves MediaPipe's: ``truth2d_pa_mpjpe_mm``
+(what the solve gives with perfect keypoints) and ``truth2d_noise3_pa_mpjpe_mm`` (with Gaussian noise of 3 px on
+each, seed 0: MediaPipe's own error is 2.4-4.7 px median, ``keypoint_px_median``).
+
+    python bench/mediapipe_compare.py [--takes sample,hop131_03_f1000_high] [--set NODE.PARAM=VALUE ...] [--repeats 5] [--ceiling]
 """
 from __future__ import annotations
 
@@ -66,7 +71,8 @@ def world_joints(world: np.ndarray) -> np.ndarray:
     return joints16_from_landmarks(xyz, np.nan_to_num(world[..., 3]), MEDIAPIPE_POSE)[0]
 
 
-def score(name: str, sets: dict, jobs: int | None = None, repeats: int = 0, jitter_px: float = 0.5) -> dict:
+def score(name: str, sets: dict, jobs: int | None = None, repeats: int = 0, jitter_px: float = 0.5,
+          ceiling: bool = False) -> dict:
     folder = render(name)
     vars = {"video": str(folder / "sample.mp4"), "ground_truth": str(folder / "ground_truth.npz")}
     graph = load_graph(ROOT / "pipelines" / "mediapipe.yaml", sets=sets, vars=vars)
@@ -103,6 +109,19 @@ def score(name: str, sets: dict, jobs: int | None = None, repeats: int = 0, jitt
         "focal_err_pct": (float(metrics.get("focal_px", np.nan)) / f_true - 1.0) * 100.0,
     }
     out["ratio"] = out["mediapipe_world_pa_mpjpe_mm"] / out["ours_pa_mpjpe_mm"]
+    if ceiling:
+        from mediapipe_sides import solve
+
+        tracks = run.output("detect.tracks")
+        points = np.asarray(tracks["points"], dtype=np.float64)
+        tracked = np.asarray(tracks["tracked"], dtype=bool)
+        true2d = np.asarray(gt["joints2d"], dtype=np.float64)[: len(points)]
+        out["keypoint_px_median"] = float(np.median(np.linalg.norm(points - true2d, axis=-1)[tracked]))
+        perfect = {**tracks, "points": true2d, "tracked": np.ones_like(tracked), "confidence": np.ones(tracked.shape),
+                   "point_offsets": np.zeros((len(JOINT_NAMES), 2))}
+        for key, noise in (("truth2d_pa_mpjpe_mm", 0.0), ("truth2d_noise3_pa_mpjpe_mm", 3.0)):
+            pts = true2d + np.random.default_rng(0).normal(0.0, noise, true2d.shape) if noise else true2d
+            out[key] = solve(graph, {**perfect, "points": pts}, run.output("lens.lens"), run.output("body.body"), truth)[0]
     if repeats > 0:
         from mediapipe_sides import solve
 
@@ -127,6 +146,8 @@ def main() -> None:
                     "MediaPipe and the room's lines at the same time)")
     ap.add_argument("--repeats", type=int, default=0, help="also solve the keypoints this many times (the first as they "
                     "are, the others jittered) and print the solver's PA-MPJPE over them")
+    ap.add_argument("--ceiling", action="store_true", help="also solve the true 2D joints (and them with 3 px of noise) in "
+                    "MediaPipe's place: what the solve gives with perfect keypoints")
     ap.add_argument("--jitter-px", type=float, default=0.5, help="sd of the noise added to the keypoints in repeats 2..K, pixels")
     a = ap.parse_args()
     if a.repeats < 0 or a.jitter_px < 0:
@@ -137,7 +158,7 @@ def main() -> None:
         sets[k] = yaml.safe_load(v)
     for name in a.takes.split(","):
         try:
-            r = score(name, sets, a.jobs, a.repeats, a.jitter_px)
+            r = score(name, sets, a.jobs, a.repeats, a.jitter_px, a.ceiling)
         except Exception as e:  # noqa: BLE001 - one take failing is a result too; the others still run
             print(f"take={name} error={type(e).__name__}: {str(e).splitlines()[0]}", flush=True)
             continue
