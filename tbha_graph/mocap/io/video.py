@@ -128,10 +128,7 @@ def iter_frames(clip: VideoClip, start: int | None = None, stop: int | None = No
     last = clip.stop if stop is None else min(int(stop), clip.stop)
     if first >= last:
         return
-    path = Path(clip.path)
-    if not path.is_file():
-        raise NodeError(f"video {path} does not exist any more", hint="re-run io.video with the video's current path")
-    cap = _open(path)
+    path, cap = _open_clip(clip)
     try:
         if first > 0:
             cap.set(cv2.CAP_PROP_POS_FRAMES, first)
@@ -140,6 +137,14 @@ def iter_frames(clip: VideoClip, start: int | None = None, stop: int | None = No
             yield index, _checked(clip, path, index, ok, frame, f"frames {first}..{last - 1} were requested")
     finally:
         cap.release()
+
+
+def _open_clip(clip: VideoClip) -> tuple[Path, cv2.VideoCapture]:
+    """The clip's file and an open capture of it, or a NodeError when the file is gone."""
+    path = Path(clip.path)
+    if not path.is_file():
+        raise NodeError(f"video {path} does not exist any more", hint="re-run io.video with the video's current path")
+    return path, _open(path)
 
 
 def _checked(clip: VideoClip, path: Path, index: int, ok: bool, frame, requested: str) -> np.ndarray:
@@ -177,14 +182,11 @@ def iter_frames_at(clip: VideoClip, indices) -> Iterator[tuple[int, np.ndarray]]
         return
     if any(b <= a for a, b in zip(picks, picks[1:])) or picks[0] < clip.start or picks[-1] >= clip.stop:
         raise ValueError(f"frame indices must be sorted, unique and within {clip.start}..{clip.stop - 1}: {picks[:5]}...")
-    path = Path(clip.path)
-    if not path.is_file():
-        raise NodeError(f"video {path} does not exist any more", hint="re-run io.video with the video's current path")
-    cap = _open(path)
+    path, cap = _open_clip(clip)
     try:
         at = 0  # the next frame the capture decodes
         for index in picks:
-            if index - at > SEEK_GAP or index < at:
+            if index - at > SEEK_GAP:
                 cap.set(cv2.CAP_PROP_POS_FRAMES, index)
                 at = index
             while at < index:
