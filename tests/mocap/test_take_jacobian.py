@@ -22,7 +22,7 @@ from tbha_graph.mocap.segment.silhouette import distance_outside
 TRUTH = Path(__file__).resolve().parents[2] / "data" / "sample" / "ground_truth.npz"
 KINDS = {"reprojection": slice(0, 32), "torso": slice(32, 32 + len(TORSO_PAIRS)),
          "hinge": slice(43, 43 + len(HINGES)), "below_floor": slice(47, 49), "contact": slice(49, 51),
-         "head": slice(51, 54), "twist": slice(54, 57), "silhouette": slice(N_FRAME_RES, N_FRAME_RES + N_SIL - 4),
+         "head": slice(51, 54), "twist": slice(54, 57), "pelvis": slice(57, 58), "silhouette": slice(N_FRAME_RES, N_FRAME_RES + N_SIL - 4),
          "support": slice(N_FRAME_RES + N_SIL - 4, N_FRAME_RES + N_SIL - 3), "away": slice(N_FRAME_RES + N_SIL - 3, N_FRAME_RES + N_SIL - 1),
          "bottom": slice(N_FRAME_RES + N_SIL - 1, N_FRAME_RES + N_SIL), "cover": slice(N_FRAME_RES + N_SIL, N_FRAME_RES + N_SIL + N_COVER),
          "upright": slice(N_FRAME_RES + N_SIL + N_COVER, N_FRAME_RES + N_SIL + N_COVER + 1),
@@ -87,7 +87,7 @@ def test_analytic_frame_jacobian_equals_central_differences():
     data = TakeData(uv, weight, L, centre, fps, 0.08, contact, rest_pair_distances(L, 0.08),
                     silhouette=thin_silhouettes(joints_uv, ghost=60.0), away=np.arange(n) % 2 == 0, up=-nf, facing=facing,
                     keypoints=kp, kp_weight=kp_weight, tpose=np.arange(n) < 12)
-    prob = TakeProblem(data, bone_directions(P), nf, Weights(sigma_twist=0.2, support_band=-0.03, upright_sin=0.15,
+    prob = TakeProblem(data, bone_directions(P), nf, Weights(sigma_twist=0.2, sigma_pelvis=0.01, support_band=-0.03, upright_sin=0.15,
                                                           sigma_hang=0.5),
                        DEFAULT_POINT_OFFSETS.copy(), free_offsets=False)
     g = np.array([np.log(700.0), 0.0, 0.0, d - 0.04])  # the floor 4 cm up: some ankles below it

@@ -154,6 +154,16 @@ class SolveTakeParams(BaseModel):
                             "142.9 / 126.8); single draws, each uncertain by ~15 mm: over 3 repeats (bench/solver_sweep.py "
                             "--repeats 3, no hang) 1 / 2 px 136.1 / 126.8 mm", json_schema_extra={"unit": "px"})
     sigma_acc: float = Field(30.0, gt=0, description="typical joint acceleration (smoothness prior)", json_schema_extra={"unit": "m/s^2"})
+    sigma_torso: float = Field(0.05, gt=0, description="torso distances (shoulders, hip joints, hips, chest, neck) around the rest pose's, metres")
+    sigma_pelvis: float | None = Field(None, gt=0, description="the hips joint's distance in front of the plane through the hip "
+                                       "joints and the chest (take_model.pelvis_depth) around pelvis_depth_m, metres; None: off. "
+                                       "Measured at 0.01 (bench/solver_sweep.py --repeats 3, 2026-11-28): the pose better "
+                                       "(all16_rootrel 68.5 -> 63.6 mm, T-pose 19.2 -> 14.2, the sample's PA 26.0 -> 21.7), "
+                                       "seq-MPJPE not (all16 91.3 -> 93.2 within the repeats' spread); off until its effect "
+                                       "on the floor's height is understood (docs/solver-log.md)")
+    pelvis_depth_m: float = Field(-0.03, ge=-0.2, le=0.2, description="with sigma_pelvis: where the hips joint sits in front of the "
+                                  "plane through the hip joints and the chest, metres (negative: behind it; the renders' CMU "
+                                  "skeletons: -28 to -35 mm)")
     sigma_twist: float = Field(0.2, gt=0, description="pelvis-thorax twist prior: difference of their unit forward vectors (0.2: about 11 degrees; walking twists 5-15)")
     sigma_acc_torso: float | None = Field(5.0, gt=0, description="torso joints' (hips, spine, shoulders, hip joints) acceleration prior, tighter than the limbs' (walking moves the hips at 2-3 m/s^2): it steadies the body's depth, which the image fixes only weakly; None: sigma_acc", json_schema_extra={"unit": "m/s^2"})
     ankle_height: float = Field(DEFAULT_ANKLE_HEIGHT, ge=0, le=0.3, description="ankle joint height above the floor when standing", json_schema_extra={"unit": "m"})
@@ -458,7 +468,8 @@ def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: Solve
     data = TakeData(points, weight, lengths, centre, fps, p.ankle_height, contact,
                     rest_pair_distances(lengths, p.ankle_height), silhouette=silhouette,
                     away=None if silhouette is None else facing_away(weight), up=nf, **(hints or {}))
-    w = Weights(sigma_px=p.sigma_px, sigma_acc=p.sigma_acc, sigma_twist=p.sigma_twist, sigma_acc_torso=p.sigma_acc_torso,
+    w = Weights(sigma_px=p.sigma_px, sigma_acc=p.sigma_acc, sigma_twist=p.sigma_twist, sigma_torso=p.sigma_torso,
+                sigma_pelvis=p.sigma_pelvis, pelvis_depth=p.pelvis_depth_m, sigma_acc_torso=p.sigma_acc_torso,
                 sigma_sil=p.sigma_sil, sigma_hang=p.sigma_hang, sigma_facing=p.sigma_facing, sigma_kp=p.sigma_kp,
                 sigma_tpose=Weights.sigma_tpose if p.sigma_tpose is None else p.sigma_tpose)  # None: no T-pose data
     offsets = point_offsets_of(p)

@@ -142,6 +142,20 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
     for jj, Dj in zip(THORAX_JOINTS, d_thorax):
         out[:, row:row + 3, jj] -= Dj / w.sigma_twist
     row += 3
+    # the hips' depth from the plane of the hip joints and the chest: s = (h - m) . unit(a x b), a = l - r,
+    # b = c - m, m = (l + r) / 2; with g = N (h - m) (N the unit vector's derivative): ds = n.dh - n.dm - (g x b).da + (g x a).db
+    if w.sigma_pelvis is not None:
+        l, r, c, hp = (P[:, J[k]] for k in ("left_hip", "right_hip", "chest", "hips"))
+        m = 0.5 * (l + r)
+        a, b = l - r, c - m
+        nn, N = unit_jacobian(np.cross(a, b))
+        gv = (N @ (hp - m)[..., None])[..., 0]
+        gb, ga = np.cross(gv, b), np.cross(gv, a)
+        out[:, row, J["hips"]] += nn / w.sigma_pelvis
+        out[:, row, J["left_hip"]] += (-0.5 * nn - gb - 0.5 * ga) / w.sigma_pelvis
+        out[:, row, J["right_hip"]] += (-0.5 * nn + gb - 0.5 * ga) / w.sigma_pelvis
+        out[:, row, J["chest"]] += ga / w.sigma_pelvis
+    row += 1
     if d.silhouette is not None:
         sil = _silhouette(prob, P, g, rows)
         for k, (a, b) in enumerate(SIL_PAIRS):

@@ -123,6 +123,16 @@ def fronts(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return front_of(P, THORAX_JOINTS), front_of(P, PELVIS_JOINTS)
 
 
+def pelvis_depth(P: np.ndarray) -> np.ndarray:
+    """How far the hips joint lies in front of the plane through the hip joints and the chest ``(..., n)`` metres
+    (negative: behind it), along that plane's normal ``(l - r) x (chest - (l + r) / 2)`` (forward for a body facing
+    +z), from joints ``P`` ``(..., n, 16, 3)``. The bones' lengths and the torso's distances leave it free to fold
+    either way (the rest T-pose has it flat); the CMU skeletons of the renders have it 28-35 mm behind."""
+    l, r, c, h = (P[..., J[k], :] for k in ("left_hip", "right_hip", "chest", "hips"))
+    m = 0.5 * (l + r)
+    return np.sum((h - m) * unit(np.cross(l - r, c - m)), axis=-1)
+
+
 def point_positions(P: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     """Tracked points ``(..., n, 16, 3)``: each joint of ``P`` ``(..., n, 16, 3)`` moved by its ``offsets`` ``(16, 2)``
     (metres along the limb axis through it (:data:`AXIS_TRIPLES`), and out of the body's front made perpendicular to that bone)."""
@@ -210,6 +220,8 @@ class Weights:
     sigma_length: float = 0.03  # free bone lengths around the body's (log, i.e. relative)
     sigma_pose: float = 0.5      # weak pose prior: head along the neck (unit vectors)
     sigma_twist: float = 0.5     # pelvis facing as the thorax (unit vectors; 0.2 is about 11 degrees of twist)
+    sigma_pelvis: float | None = None  # the hips joint's distance in front of the plane of the hip joints and the chest
+    pelvis_depth: float = -0.03  # around this (metres; negative: behind it), :func:`pelvis_depth` (None: off)
     contact_band: float = 0.03   # a planted ankle may rise this far above its standing height (heel and toe roll), metres
     sigma_offset: float = 0.03   # point offsets around their defaults, metres
     robust_scale: float = 2.0    # reprojection residuals beyond this many sigmas count as soft-L1 (outliers)
@@ -595,7 +607,7 @@ def frame_blocks(d: TakeData) -> dict[str, slice]:
     (:meth:`TakeProblem.term_costs`) and their Jacobian (:func:`.take_jacobian.residual_jacobian`)."""
     has_sil = d.silhouette is not None
     sizes = [("reprojection", N_JOINTS * 2), ("torso", len(TORSO_PAIRS)), ("hinge", len(HINGES)), ("below_floor", 2),
-             ("contact", 2), ("pose", 6), ("silhouette", N_SIL if has_sil else 0), ("cover", N_COVER if has_sil else 0),
+             ("contact", 2), ("pose", 6), ("pelvis", 1), ("silhouette", N_SIL if has_sil else 0), ("cover", N_COVER if has_sil else 0),
              ("upright", 1 if has_sil else 0), ("hang", N_HANG if has_sil else 0)]
     sizes += [(nm, k) for nm, k, on in (("keypoints", N_KP, d.keypoints is not None), ("facing", N_FACING, d.facing is not None),
                                          ("tpose", N_TPOSE, d.holds_tpose)) if on]
@@ -632,7 +644,7 @@ class Layout:
 #: facing where the thorax faces, 3); with a silhouette, :data:`N_SIL` + :data:`N_COVER` + 1 + :data:`N_HANG` more,
 #: with a facing hint :data:`N_FACING` more, on a take with an opening T-pose :data:`N_TPOSE` more
 #: (:attr:`TakeProblem.n_frame_res`).
-N_FRAME_RES = N_JOINTS * 2 + len(TORSO_PAIRS) + len(HINGES) + 4 + 6
+N_FRAME_RES = N_JOINTS * 2 + len(TORSO_PAIRS) + len(HINGES) + 4 + 6 + 1
 #: With a facing hint (:attr:`TakeData.facing`), the residuals of a frame before the T-pose's: the thorax's and the
 #: pelvis's fronts against the hint's (:func:`facing_residual`)
 N_FACING = 6
@@ -739,7 +751,9 @@ class TakeProblem:
         neck = P[..., J["neck"], :]
         head = (unit(P[..., J["head"], :] - neck) - unit(neck - P[..., J["chest"], :])) / w.sigma_pose
         twist = (pelvis - thorax) / w.sigma_twist
-        terms = [rep, torso, np.stack(hin, axis=-1), below, on, head, twist]
+        pelvis_fold = (np.zeros(P.shape[:-2] + (1,)) if w.sigma_pelvis is None
+                       else ((pelvis_depth(P) - w.pelvis_depth) / w.sigma_pelvis)[..., None])
+        terms = [rep, torso, np.stack(hin, axis=-1), below, on, head, twist, pelvis_fold]
         if d.silhouette is not None:  # the silhouette's points, and the support: with them the feet's image rows fix the depth
             away = np.zeros(P.shape[0], bool) if d.away is None else np.asarray(d.away, dtype=bool)
             to_cam = [-unit(P[..., J["chest"], :]), -unit(P[..., J["hips"], :])]
