@@ -220,8 +220,8 @@ class Weights:
     sigma_length: float = 0.03  # free bone lengths around the body's (log, i.e. relative)
     sigma_pose: float = 0.5      # weak pose prior: head along the neck (unit vectors)
     sigma_twist: float = 0.5     # pelvis facing as the thorax (unit vectors; 0.2 is about 11 degrees of twist)
-    sigma_pelvis: float | None = None  # the hips joint's distance in front of the plane of the hip joints and the chest
-    pelvis_depth: float = -0.03  # around this (metres; negative: behind it), :func:`pelvis_depth` (None: off)
+    sigma_pelvis: float | None = None  # the hips joint's distance in front of the plane of the hip joints and the chest (None: off)
+    pelvis_depth: float = -0.03  # around this (metres; negative: behind it), :func:`pelvis_depth`
     contact_band: float = 0.03   # a planted ankle may rise this far above its standing height (heel and toe roll), metres
     sigma_offset: float = 0.03   # point offsets around their defaults, metres
     robust_scale: float = 2.0    # reprojection residuals beyond this many sigmas count as soft-L1 (outliers)
@@ -641,7 +641,7 @@ class Layout:
 
 #: Residuals per frame that depend on that frame alone: reprojection (16 x 2), torso distances, hinges,
 #: ankle below the floor (2), planted ankle off the floor (2), pose prior (head along the neck, 3; pelvis
-#: facing where the thorax faces, 3); with a silhouette, :data:`N_SIL` + :data:`N_COVER` + 1 + :data:`N_HANG` more,
+#: facing where the thorax faces, 3), the hips' fold (:func:`pelvis_depth`, 1; zero unless ``sigma_pelvis``); with a silhouette, :data:`N_SIL` + :data:`N_COVER` + 1 + :data:`N_HANG` more,
 #: with a facing hint :data:`N_FACING` more, on a take with an opening T-pose :data:`N_TPOSE` more
 #: (:attr:`TakeProblem.n_frame_res`).
 N_FRAME_RES = N_JOINTS * 2 + len(TORSO_PAIRS) + len(HINGES) + 4 + 6 + 1
