@@ -254,19 +254,23 @@ def test_undetected_runs_followed_by_a_detection_are_the_ones_backfilled():
 
 
 
-class _TrackingPose:
-    """A stand-in MediaPipe Pose in video mode for the backfill test: frame ``k`` (its blue channel / 10) is found
-    when the pose is being tracked (a frame before found it) or newly detected (``k`` not in ``missed``), and lost on
-    ``lost`` frames whatever came before."""
-
-    def __init__(self, missed: set, lost: set, fed: list):
-        self.missed, self.lost, self.fed, self.tracking = missed, lost, fed, False
+class _PoseContext:
+    """What the stand-in Poses share with MediaPipe's: use as a context manager (``with ... as pose``)."""
 
     def __enter__(self):
         return self
 
     def __exit__(self, *exc):
         return False
+
+
+class _TrackingPose(_PoseContext):
+    """A stand-in MediaPipe Pose in video mode for the backfill test: frame ``k`` (its blue channel / 10) is found
+    when the pose is being tracked (a frame before found it) or newly detected (``k`` not in ``missed``), and lost on
+    ``lost`` frames whatever came before."""
+
+    def __init__(self, missed: set, lost: set, fed: list):
+        self.missed, self.lost, self.fed, self.tracking = missed, lost, fed, False
 
     def process(self, rgb):
         k = int(round(rgb[0, 0, 2] / 10.0))
@@ -334,18 +338,13 @@ def test_backfill_beside_the_parts_tracks_every_missed_run_backwards_once(tmp_pa
     stop.set()
     assert mpp._backfill_run(None, clip, p, 0, 4, image, world, stop) == [] and fed == []
 
-class _FakePose:
+
+class _FakePose(_PoseContext):
     """Stands in for a MediaPipe Pose in the threading tests of ``run_parts``: records the frames it is fed (the blue
     channel encodes each frame's number, see ``_video``) and raises on frame ``fail_at``."""
 
     def __init__(self, fed: list, fail_at: int | None):
         self.fed, self.fail_at = fed, fail_at
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        return False
 
     def process(self, rgb):
         k = int(round(rgb[0, 0, 2] / 20.0))
