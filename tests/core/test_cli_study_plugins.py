@@ -220,7 +220,7 @@ def test_core_does_not_import_mocap():
 
 
 def test_dask_executor_matches_local_and_runs_independent_nodes_in_parallel(write, tmp_path):
-    distributed = pytest.importorskip("distributed")
+    pytest.importorskip("distributed")
     from distributed import Client, LocalCluster
 
     from tbha_graph.core.cache import Cache

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import example, given
+from hypothesis import given
 
 from fuzzlib import CASES, assert_names_file, case, fuzz_settings, mutated, time_limit, vocabulary
 from tbha_graph.mocap.io.bvh import read_bvh, write_bvh

@@ -19,7 +19,7 @@ from tbha_graph.core.testing import run_node
 from tbha_graph.mocap.io.skeleton_map import rotations16_from_bvh
 from tbha_graph.mocap.kinematics import forward_kinematics
 from tbha_graph.mocap.skeleton import JOINT_INDEX, PARENTS
-from tbha_graph.mocap.smpl.convert import convert, main as convert_main, read_smpl_pickle
+from tbha_graph.mocap.smpl.convert import main as convert_main, read_smpl_pickle
 from tbha_graph.mocap.smpl.from_rotations import from_rotations
 from tbha_graph.mocap.smpl.kintree import N_POSE_FEATURES, SMPL_INDEX, SMPL_PARENTS
 from tbha_graph.mocap.smpl.mesh import mesh
