@@ -20,17 +20,18 @@ from tbha_graph.mocap.reconstruct.take_model import (DEFAULT_POINT_OFFSETS, HING
 from tbha_graph.mocap.segment.silhouette import distance_outside
 
 TRUTH = Path(__file__).resolve().parents[2] / "data" / "sample" / "ground_truth.npz"
+B = N_FRAME_RES + 1  # with the balance prior's row (this test turns sigma_balance on)
 KINDS = {"reprojection": slice(0, 32), "torso": slice(32, 32 + len(TORSO_PAIRS)),
          "hinge": slice(43, 43 + len(HINGES)), "below_floor": slice(47, 49), "contact": slice(49, 51),
-         "head": slice(51, 54), "twist": slice(54, 57), "pelvis": slice(57, 58), "silhouette": slice(N_FRAME_RES, N_FRAME_RES + N_SIL - 4),
-         "support": slice(N_FRAME_RES + N_SIL - 4, N_FRAME_RES + N_SIL - 3), "away": slice(N_FRAME_RES + N_SIL - 3, N_FRAME_RES + N_SIL - 1),
-         "bottom": slice(N_FRAME_RES + N_SIL - 1, N_FRAME_RES + N_SIL), "cover": slice(N_FRAME_RES + N_SIL, N_FRAME_RES + N_SIL + N_COVER),
-         "upright": slice(N_FRAME_RES + N_SIL + N_COVER, N_FRAME_RES + N_SIL + N_COVER + 1),
-         "hang": slice(N_FRAME_RES + N_SIL + N_COVER + 1, N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG),
-         "keypoints": slice(N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG, N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_KP),
-         "facing": slice(N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_KP, N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_KP + N_FACING),
-         "tpose": slice(N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_KP + N_FACING,
-                        N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_KP + N_FACING + N_TPOSE)}
+         "head": slice(51, 54), "twist": slice(54, 57), "pelvis": slice(57, 58), "balance": slice(58, 59), "silhouette": slice(B, B + N_SIL - 4),
+         "support": slice(B + N_SIL - 4, B + N_SIL - 3), "away": slice(B + N_SIL - 3, B + N_SIL - 1),
+         "bottom": slice(B + N_SIL - 1, B + N_SIL), "cover": slice(B + N_SIL, B + N_SIL + N_COVER),
+         "upright": slice(B + N_SIL + N_COVER, B + N_SIL + N_COVER + 1),
+         "hang": slice(B + N_SIL + N_COVER + 1, B + N_SIL + N_COVER + 1 + N_HANG),
+         "keypoints": slice(B + N_SIL + N_COVER + 1 + N_HANG, B + N_SIL + N_COVER + 1 + N_HANG + N_KP),
+         "facing": slice(B + N_SIL + N_COVER + 1 + N_HANG + N_KP, B + N_SIL + N_COVER + 1 + N_HANG + N_KP + N_FACING),
+         "tpose": slice(B + N_SIL + N_COVER + 1 + N_HANG + N_KP + N_FACING,
+                        B + N_SIL + N_COVER + 1 + N_HANG + N_KP + N_FACING + N_TPOSE)}
 
 
 def thin_silhouettes(uv: np.ndarray, scale: float = 0.5, shape=(240, 320), ghost: float = 0.0, width: int = 1) -> SilhouetteField:
@@ -87,7 +88,7 @@ def test_analytic_frame_jacobian_equals_central_differences():
     data = TakeData(uv, weight, L, centre, fps, 0.08, contact, rest_pair_distances(L, 0.08),
                     silhouette=thin_silhouettes(joints_uv, ghost=60.0), away=np.arange(n) % 2 == 0, up=-nf, facing=facing,
                     keypoints=kp, kp_weight=kp_weight, tpose=np.arange(n) < 12)
-    prob = TakeProblem(data, bone_directions(P), nf, Weights(sigma_twist=0.2, sigma_pelvis=0.01, support_band=-0.03, upright_sin=0.15,
+    prob = TakeProblem(data, bone_directions(P), nf, Weights(sigma_twist=0.2, sigma_pelvis=0.01, sigma_balance=0.05, balance_band=0.05, support_band=-0.03, upright_sin=0.15,
                                                           sigma_hang=0.5),
                        DEFAULT_POINT_OFFSETS.copy(), free_offsets=False)
     g = np.array([np.log(700.0), 0.0, 0.0, d - 0.04])  # the floor 4 cm up: some ankles below it
@@ -95,7 +96,7 @@ def test_analytic_frame_jacobian_equals_central_differences():
     fr[:, 3:] += rng.normal(scale=0.35, size=(n, PER_FRAME - 3))  # bones turned ~20 degrees: hinges bent wrongly
     h = 1e-6
     F = prob.n_frame_res
-    assert F == N_FRAME_RES + N_SIL + N_COVER + 1 + N_HANG + N_KP + N_FACING + N_TPOSE
+    assert F == B + N_SIL + N_COVER + 1 + N_HANG + N_KP + N_FACING + N_TPOSE
     num = np.empty((n, F, PER_FRAME))
     for i in range(PER_FRAME):
         fp, fm = fr.copy(), fr.copy()

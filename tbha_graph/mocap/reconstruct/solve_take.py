@@ -164,6 +164,11 @@ class SolveTakeParams(BaseModel):
     pelvis_depth_m: float = Field(-0.03, ge=-0.2, le=0.2, description="with sigma_pelvis: where the hips joint sits in front of the "
                                   "plane through the hip joints and the chest, metres (negative: behind it; the renders' CMU "
                                   "skeletons: -28 to -35 mm)")
+    sigma_balance: float | None = Field(None, gt=0, description="the hips farther across the floor than balance_band_m from "
+                                        "the segment between the ankles costs ((distance - band) / sigma_balance)², metres "
+                                        "(take_model.balance_residual); None: off")
+    balance_band_m: float = Field(0.15, ge=0, le=1.0, description="with sigma_balance: how far across the floor the hips may "
+                                  "be from the ankles' segment at no cost, metres (the renders' CMU takes: at most 0.21)")
     sigma_twist: float = Field(0.2, gt=0, description="pelvis-thorax twist prior: difference of their unit forward vectors (0.2: about 11 degrees; walking twists 5-15)")
     sigma_acc_torso: float | None = Field(5.0, gt=0, description="torso joints' (hips, spine, shoulders, hip joints) acceleration prior, tighter than the limbs' (walking moves the hips at 2-3 m/s^2): it steadies the body's depth, which the image fixes only weakly; None: sigma_acc", json_schema_extra={"unit": "m/s^2"})
     ankle_height: float = Field(DEFAULT_ANKLE_HEIGHT, ge=0, le=0.3, description="ankle joint height above the floor when standing", json_schema_extra={"unit": "m"})
@@ -469,7 +474,8 @@ def make_problem(points, weight, lengths, centre, fps, P, cam_or_floor, p: Solve
                     rest_pair_distances(lengths, p.ankle_height), silhouette=silhouette,
                     away=None if silhouette is None else facing_away(weight), up=nf, **(hints or {}))
     w = Weights(sigma_px=p.sigma_px, sigma_acc=p.sigma_acc, sigma_twist=p.sigma_twist, sigma_torso=p.sigma_torso,
-                sigma_pelvis=p.sigma_pelvis, pelvis_depth=p.pelvis_depth_m, sigma_acc_torso=p.sigma_acc_torso,
+                sigma_pelvis=p.sigma_pelvis, pelvis_depth=p.pelvis_depth_m, sigma_balance=p.sigma_balance,
+                balance_band=p.balance_band_m, sigma_acc_torso=p.sigma_acc_torso,
                 sigma_sil=p.sigma_sil, sigma_hang=p.sigma_hang, sigma_facing=p.sigma_facing, sigma_kp=p.sigma_kp,
                 sigma_tpose=Weights.sigma_tpose if p.sigma_tpose is None else p.sigma_tpose)  # None: no T-pose data
     offsets = point_offsets_of(p)

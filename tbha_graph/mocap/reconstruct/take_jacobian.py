@@ -19,7 +19,8 @@ import numpy as np
 
 from ..skeleton import N_JOINTS, PARENTS
 from .take_model import (ANKLES, AXIS_TRIPLES, HANG_BONES, HINGES, J, N_BONES, N_COVER, N_KP, PELVIS_JOINTS,
-                         PELVIS_SIDE, PER_FRAME, SIL_PAIRS, THORAX_JOINTS, TORSO_PAIRS, TPOSE_PAIRS, TakeProblem, bottom_residual,
+                         PELVIS_SIDE, PER_FRAME, SIL_PAIRS, THORAX_JOINTS, TORSO_PAIRS, TPOSE_PAIRS, TakeProblem, balance_residual,
+                         bottom_residual,
                          cover_residuals, cover_segments, hang_residual, keypoint_targets, robust_slope, sil_residuals,
                          torso_unseen, unit,
                          unseen_points, upright_residual)
@@ -156,6 +157,15 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
         out[:, row, J["right_hip"]] += (-0.5 * nn + gb - 0.5 * ga) / w.sigma_pelvis
         out[:, row, J["chest"]] += ga / w.sigma_pelvis
     row += 1
+    # the hips over the feet: d dist = u . (dh - (1 - s) da - s db) (u across the floor, normal to the segment when
+    # the nearest point is inside it, so moving along the segment changes nothing)
+    if w.sigma_balance is not None:
+        _, bal = balance_residual(P, d, w)
+        k = (bal["on"] / w.sigma_balance)[:, None] * bal["u"]
+        out[:, row, J["hips"]] += k
+        out[:, row, J["left_ankle"]] -= (1.0 - bal["s"])[:, None] * k
+        out[:, row, J["right_ankle"]] -= bal["s"][:, None] * k
+        row += 1
     if d.silhouette is not None:
         sil = _silhouette(prob, P, g, rows)
         for k, (a, b) in enumerate(SIL_PAIRS):

@@ -222,6 +222,8 @@ class Weights:
     sigma_twist: float = 0.5     # pelvis facing as the thorax (unit vectors; 0.2 is about 11 degrees of twist)
     sigma_pelvis: float | None = None  # the hips joint's distance in front of the plane of the hip joints and the chest (None: off)
     pelvis_depth: float = -0.03  # around this (metres; negative: behind it), :func:`pelvis_depth`
+    sigma_balance: float | None = None  # the hips farther across the floor than balance_band from the ankles' segment (None: off)
+    balance_band: float = 0.15   # metres, :func:`balance_residual`
     contact_band: float = 0.03   # a planted ankle may rise this far above its standing height (heel and toe roll), metres
     sigma_offset: float = 0.03   # point offsets around their defaults, metres
     robust_scale: float = 2.0    # reprojection residuals beyond this many sigmas count as soft-L1 (outliers)
@@ -478,6 +480,31 @@ def upright_residual(P: np.ndarray, d: TakeData, w: "Weights"):
     return np.where(on, s - w.upright_sin, 0.0) / w.sigma_upright, {"h": h, "s": s, "on": on, "up": up}
 
 
+def balance_residual(P: np.ndarray, d: TakeData, w: "Weights") -> tuple[np.ndarray, dict]:
+    """The hips over the feet ``(..., n)``: ``max(dist - balance_band, 0) / sigma_balance``, ``dist`` the distance
+    across the floor (perpendicular to ``d.up``) from the hips joint to the segment between the two ankles; 0 without
+    ``sigma_balance`` or ``d.up``. Someone standing, walking, turning or hopping keeps the hips within about 0.2 m
+    of that segment (the renders' CMU takes: p95 76-161 mm, at most 208), while the image fixes the body's lean
+    into depth weakly: the solves had the hips up to 0.3-0.5 m off it on the turning renders, where their errors
+    were largest. Returns the residuals and, for the Jacobian, ``s`` (where along the segment the nearest point
+    lies, 0 at the left ankle) and ``u`` (the unit direction from that point to the hips, camera frame) ``(..., n[, 3])``
+    and the active mask."""
+    shape = P.shape[:-2]
+    if w.sigma_balance is None or d.up is None:
+        return np.zeros(shape), {"on": np.zeros(shape, bool)}
+    up = unit(np.asarray(d.up, dtype=np.float64))
+    a, b, h = P[..., J["left_ankle"], :], P[..., J["right_ankle"], :], P[..., J["hips"], :]
+    E, H = b - a, h - a
+    E = E - (E @ up)[..., None] * up
+    H = H - (H @ up)[..., None] * up
+    s = np.clip(np.sum(H * E, axis=-1) / np.maximum(np.sum(E * E, axis=-1), 1e-12), 0.0, 1.0)
+    D = H - s[..., None] * E
+    dist = np.linalg.norm(D, axis=-1)
+    on = dist > w.balance_band
+    return (np.where(on, dist - w.balance_band, 0.0) / w.sigma_balance,
+            {"s": s, "u": D / np.maximum(dist, 1e-12)[..., None], "on": on})
+
+
 #: Limb bones (by child joint) the hang prior (:func:`hang_residual`) pulls towards straight down.
 HANG_BONES = np.array([J[n] for n in ("left_elbow", "left_wrist", "right_elbow", "right_wrist",
                                       "left_knee", "left_ankle", "right_knee", "right_ankle")])
@@ -600,14 +627,16 @@ def seat_on_outline(P: np.ndarray, f: float, centre: np.ndarray, nf: np.ndarray,
     return P + (best - 1.0)[:, None, None] * P[:, None, 0]
 
 
-def frame_blocks(d: TakeData) -> dict[str, slice]:
+def frame_blocks(d: TakeData, w: "Weights | None" = None) -> dict[str, slice]:
     """Where each kind of per-frame residual sits in a frame's block of :meth:`TakeProblem.frame_terms`, in order:
-    the terms every take has (the silhouette's four with zero rows without a silhouette), then the keypoints,
+    the terms every take has, the balance prior's with ``w.sigma_balance`` (``w``: the problem's :class:`Weights`), the
+    silhouette's four (zero rows without a silhouette), then the keypoints,
     the facing hint and the opening T-pose, each only with its data. One layout for the residuals' costs
     (:meth:`TakeProblem.term_costs`) and their Jacobian (:func:`.take_jacobian.residual_jacobian`)."""
     has_sil = d.silhouette is not None
     sizes = [("reprojection", N_JOINTS * 2), ("torso", len(TORSO_PAIRS)), ("hinge", len(HINGES)), ("below_floor", 2),
-             ("contact", 2), ("pose", 6), ("pelvis", 1), ("silhouette", N_SIL if has_sil else 0), ("cover", N_COVER if has_sil else 0),
+             ("contact", 2), ("pose", 6), ("pelvis", 1),
+             ("balance", 1 if w is not None and w.sigma_balance is not None else 0), ("silhouette", N_SIL if has_sil else 0), ("cover", N_COVER if has_sil else 0),
              ("upright", 1 if has_sil else 0), ("hang", N_HANG if has_sil else 0)]
     sizes += [(nm, k) for nm, k, on in (("keypoints", N_KP, d.keypoints is not None), ("facing", N_FACING, d.facing is not None),
                                          ("tpose", N_TPOSE, d.holds_tpose)) if on]
@@ -641,7 +670,8 @@ class Layout:
 
 #: Residuals per frame that depend on that frame alone: reprojection (16 x 2), torso distances, hinges,
 #: ankle below the floor (2), planted ankle off the floor (2), pose prior (head along the neck, 3; pelvis
-#: facing where the thorax faces, 3), the hips' fold (:func:`pelvis_depth`, 1; zero unless ``sigma_pelvis``); with a silhouette, :data:`N_SIL` + :data:`N_COVER` + 1 + :data:`N_HANG` more,
+#: facing where the thorax faces, 3), the hips' fold (:func:`pelvis_depth`, 1; zero unless ``sigma_pelvis``); with
+#: ``sigma_balance`` the hips over the feet (:func:`balance_residual`) 1 more; with a silhouette, :data:`N_SIL` + :data:`N_COVER` + 1 + :data:`N_HANG` more,
 #: with a facing hint :data:`N_FACING` more, on a take with an opening T-pose :data:`N_TPOSE` more
 #: (:attr:`TakeProblem.n_frame_res`).
 N_FRAME_RES = N_JOINTS * 2 + len(TORSO_PAIRS) + len(HINGES) + 4 + 6 + 1
@@ -677,7 +707,7 @@ class TakeProblem:
         # (up (3,) camera frame, sigma radians): the floor's normal as the room's lines show it
         self.floor_prior = None if floor_prior is None else (unit(np.asarray(floor_prior[0], dtype=np.float64)), float(floor_prior[1]))
         self.n_glob = 0 if fixed_globals is not None else self.layout.n_globals
-        self.blocks = frame_blocks(data)
+        self.blocks = frame_blocks(data, weights)
         self.n_frame_res = next(reversed(self.blocks.values())).stop
         self.set_refs(ref, n_ref)
 
@@ -754,6 +784,8 @@ class TakeProblem:
         pelvis_fold = (np.zeros(P.shape[:-2] + (1,)) if w.sigma_pelvis is None
                        else ((pelvis_depth(P) - w.pelvis_depth) / w.sigma_pelvis)[..., None])
         terms = [rep, torso, np.stack(hin, axis=-1), below, on, head, twist, pelvis_fold]
+        if w.sigma_balance is not None:  # its own row only when on: a zero row would change the solve's arithmetic
+            terms.append(balance_residual(P, d, w)[0][..., None])
         if d.silhouette is not None:  # the silhouette's points, and the support: with them the feet's image rows fix the depth
             away = np.zeros(P.shape[0], bool) if d.away is None else np.asarray(d.away, dtype=bool)
             to_cam = [-unit(P[..., J["chest"], :]), -unit(P[..., J["hips"], :])]
