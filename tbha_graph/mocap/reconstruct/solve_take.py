@@ -166,7 +166,10 @@ class SolveTakeParams(BaseModel):
                                   "skeletons: -28 to -35 mm)")
     sigma_balance: float | None = Field(None, gt=0, description="the hips farther across the floor than balance_band_m from "
                                         "the segment between the ankles costs ((distance - band) / sigma_balance)², metres "
-                                        "(take_model.balance_residual); None: off")
+                                        "(take_model.balance_residual); None: off. Measured at 0.05 with the band 0.15 "
+                                        "(bench/solver_sweep.py --repeats 3, 2026-11-28): the suit's all16 90.2 -> 88.1 mm "
+                                        "on one set of draws, 88.6 -> 88.6 on fresh ones (rootrel 2-3 mm better on both); "
+                                        "MediaPipe's keypoints better on all four renders (pipelines/mediapipe.yaml: 0.05)")
     balance_band_m: float = Field(0.15, ge=0, le=1.0, description="with sigma_balance: how far across the floor the hips may "
                                   "be from the ankles' segment at no cost, metres (the renders' CMU takes: at most 0.21)")
     sigma_twist: float = Field(0.2, gt=0, description="pelvis-thorax twist prior: difference of their unit forward vectors (0.2: about 11 degrees; walking twists 5-15)")
