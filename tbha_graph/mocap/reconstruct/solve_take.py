@@ -164,14 +164,14 @@ class SolveTakeParams(BaseModel):
     pelvis_depth_m: float = Field(-0.03, ge=-0.2, le=0.2, description="with sigma_pelvis: where the hips joint sits in front of the "
                                   "plane through the hip joints and the chest, metres (negative: behind it; the renders' CMU "
                                   "skeletons: -28 to -35 mm)")
-    sigma_balance: float | None = Field(None, gt=0, description="the hips farther across the floor than balance_band_m from "
+    sigma_balance: float | None = Field(0.05, gt=0, description="the hips farther across the floor than balance_band_m from "
                                         "the segment between the ankles costs ((distance - band) / sigma_balance)², metres "
-                                        "(take_model.balance_residual); None: off. Measured at 0.05 with the band 0.15 "
-                                        "(bench/solver_sweep.py --repeats 3, 2026-11-28): the suit's all16 90.2 -> 88.1 mm "
-                                        "on one set of draws, 88.6 -> 88.6 on fresh ones (rootrel 2-3 mm better on both); "
-                                        "MediaPipe's keypoints better on all four renders (pipelines/mediapipe.yaml: 0.05)")
-    balance_band_m: float = Field(0.15, ge=0, le=1.0, description="with sigma_balance: how far across the floor the hips may "
-                                  "be from the ankles' segment at no cost, metres (the renders' CMU takes: at most 0.21)")
+                                        "(take_model.balance_residual); None: off. With the band 0.2 (bench/solver_sweep.py "
+                                        "--repeats 3, 2026-11-28): all16 90.2 -> 88.2 mm, on fresh draws 88.6 -> 85.9; the "
+                                        "sample unchanged (its hips stay within the band); pipelines/mediapipe.yaml: band 0.15")
+    balance_band_m: float = Field(0.2, ge=0, le=1.0, description="with sigma_balance: how far across the floor the hips may "
+                                  "be from the ankles' segment at no cost, metres (the renders' CMU takes: at most 0.21; 0.15: all16 88.1 / 88.6 mm, "
+                                  "the held-out full turn worse)")
     sigma_twist: float = Field(0.2, gt=0, description="pelvis-thorax twist prior: difference of their unit forward vectors (0.2: about 11 degrees; walking twists 5-15)")
     sigma_acc_torso: float | None = Field(5.0, gt=0, description="torso joints' (hips, spine, shoulders, hip joints) acceleration prior, tighter than the limbs' (walking moves the hips at 2-3 m/s^2): it steadies the body's depth, which the image fixes only weakly; None: sigma_acc", json_schema_extra={"unit": "m/s^2"})
     ankle_height: float = Field(DEFAULT_ANKLE_HEIGHT, ge=0, le=0.3, description="ankle joint height above the floor when standing", json_schema_extra={"unit": "m"})
