@@ -713,8 +713,8 @@ def test_pelvis_depth_is_the_hips_behind_the_hip_joints_and_chest(truth):
 
 def test_balance_residual_is_the_hips_across_the_floor_from_the_feet(truth):
     """``take_model.balance_residual`` (the optional balance prior, ``sigma_balance``): the sample's CMU walk keeps
-    its hips within 82 mm of the segment between its ankles across the floor (measured: p95 76 mm), so at the
-    default band (0.15 m) it costs nothing; the same walk with the upper body carried 0.4 m sideways over the feet
+    its hips within 82 mm of the segment between its ankles across the floor (measured: p95 76 mm), so at a band of
+    0.15 m (pipelines/mediapipe.yaml's; the default 0.2) it costs nothing; the same walk with the upper body carried 0.4 m sideways over the feet
     (the solves had the hips up to 0.3-0.5 m off on the turning renders) costs on every frame, by the distance beyond
     the band (measured 0.24-0.41 m from the segment);
     height does not count (the hips raised 1 m change nothing) and neither does turning the take round."""

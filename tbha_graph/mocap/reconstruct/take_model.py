@@ -223,7 +223,7 @@ class Weights:
     sigma_pelvis: float | None = None  # the hips joint's distance in front of the plane of the hip joints and the chest (None: off)
     pelvis_depth: float = -0.03  # around this (metres; negative: behind it), :func:`pelvis_depth`
     sigma_balance: float | None = None  # the hips farther across the floor than balance_band from the ankles' segment (None: off)
-    balance_band: float = 0.15   # metres, :func:`balance_residual`
+    balance_band: float = 0.2    # metres, :func:`balance_residual`
     contact_band: float = 0.03   # a planted ankle may rise this far above its standing height (heel and toe roll), metres
     sigma_offset: float = 0.03   # point offsets around their defaults, metres
     robust_scale: float = 2.0    # reprojection residuals beyond this many sigmas count as soft-L1 (outliers)
