@@ -137,10 +137,11 @@ def test_block_normal_equations_equal_the_dense_ones(truth, free_offsets, free_l
     want = -np.linalg.solve(A + 0.1 * np.diag(np.diag(A)), J.T @ r0)
     if sil:
         assert prob.term_costs(x)["silhouette"] > 1.0
-        from tbha_graph.mocap.reconstruct.take_model import N_FRAME_RES, SIL_PAIRS
+        from tbha_graph.mocap.reconstruct.take_model import SIL_PAIRS
 
         inside = prob.frame_terms(prob.joints_from_frames(prob.frames_of(x), L), prob.globals_of(x))
-        assert np.abs(inside[:, N_FRAME_RES:N_FRAME_RES + len(SIL_PAIRS)]).max() > 0.5  # the inside term active too
+        s0 = prob.blocks["silhouette"].start
+        assert np.abs(inside[:, s0:s0 + len(SIL_PAIRS)]).max() > 0.5  # the inside term active too
         assert prob.term_costs(x)["cover"] > 1.0
         assert prob.term_costs(x)["keypoints"] > 1.0 and prob.term_costs(x)["facing"] > 0.1
         assert prob.term_costs(x)["tpose"] > 1.0
@@ -259,12 +260,14 @@ def test_solver_on_the_sample_tracks_given_the_focal_length(truth, tmp_path):
     aligned, _ = align_clip(out["joints"], gt, "rigid")
     seq = np.linalg.norm(aligned - gt, axis=-1).mean() * 1000
     assert seq < SAMPLE_SEQ_BOUND_MM
-    # measured 1.491 m (the floor's height comes from the planted ankles and is weakly fixed without a silhouette)
+    # measured 1.447 m (2026-11-28); the floor's height comes from the planted ankles and is weakly fixed without a
+    # silhouette: changes to the arithmetic alone have moved it between 1.434 and 1.52 m (rounds 25-27), so the bound
+    # covers that spread rather than 1.5x of one measurement
     assert abs(out["report"]["camera_height_m"] - 1.45) < 0.062
     assert out["joints"][:, [12, 15], 1].min() > 0.08 - 0.003  # measured 0.5 mm below its resting height at worst
 
 
-SAMPLE_SEQ_BOUND_MM = 72.0  # measured 51.9 mm (sigma_px 1; 53.0 without the T-pose prior)
+SAMPLE_SEQ_BOUND_MM = 72.0  # measured 47.1 mm (2026-11-28, sigma_px 1; 46.7-55.2 across arithmetic-only changes)
 
 
 def test_long_take_in_windows_matches_the_whole_take_solve(truth):

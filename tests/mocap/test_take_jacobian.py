@@ -20,7 +20,7 @@ from tbha_graph.mocap.reconstruct.take_model import (DEFAULT_POINT_OFFSETS, HING
 from tbha_graph.mocap.segment.silhouette import distance_outside
 
 TRUTH = Path(__file__).resolve().parents[2] / "data" / "sample" / "ground_truth.npz"
-B = N_FRAME_RES + 1  # with the balance prior's row (this test turns sigma_balance on)
+B = N_FRAME_RES + 2  # with the pelvis and balance priors' rows (this test turns both on)
 KINDS = {"reprojection": slice(0, 32), "torso": slice(32, 32 + len(TORSO_PAIRS)),
          "hinge": slice(43, 43 + len(HINGES)), "below_floor": slice(47, 49), "contact": slice(49, 51),
          "head": slice(51, 54), "twist": slice(54, 57), "pelvis": slice(57, 58), "balance": slice(58, 59), "silhouette": slice(B, B + N_SIL - 4),

@@ -156,7 +156,7 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
         out[:, row, J["left_hip"]] += (-0.5 * nn - gb - 0.5 * ga) / w.sigma_pelvis
         out[:, row, J["right_hip"]] += (-0.5 * nn + gb - 0.5 * ga) / w.sigma_pelvis
         out[:, row, J["chest"]] += ga / w.sigma_pelvis
-    row += 1
+        row += 1
     # the hips over the feet: d dist = u . (dh - (1 - s) da - s db) (u across the floor, normal to the segment when
     # the nearest point is inside it, so moving along the segment changes nothing)
     if w.sigma_balance is not None:

@@ -629,13 +629,13 @@ def seat_on_outline(P: np.ndarray, f: float, centre: np.ndarray, nf: np.ndarray,
 
 def frame_blocks(d: TakeData, w: "Weights | None" = None) -> dict[str, slice]:
     """Where each kind of per-frame residual sits in a frame's block of :meth:`TakeProblem.frame_terms`, in order:
-    the terms every take has, the balance prior's with ``w.sigma_balance`` (``w``: the problem's :class:`Weights`), the
-    silhouette's four (zero rows without a silhouette), then the keypoints,
-    the facing hint and the opening T-pose, each only with its data. One layout for the residuals' costs
+    the terms every take has, the pelvis's and the balance prior's rows with ``w.sigma_pelvis`` / ``w.sigma_balance``
+    (``w``: the problem's :class:`Weights`), the silhouette's four with a silhouette, then the keypoints, the facing
+    hint and the opening T-pose, each only with its data (a term that is off has no rows). One layout for the residuals' costs
     (:meth:`TakeProblem.term_costs`) and their Jacobian (:func:`.take_jacobian.residual_jacobian`)."""
     has_sil = d.silhouette is not None
     sizes = [("reprojection", N_JOINTS * 2), ("torso", len(TORSO_PAIRS)), ("hinge", len(HINGES)), ("below_floor", 2),
-             ("contact", 2), ("pose", 6), ("pelvis", 1),
+             ("contact", 2), ("pose", 6), ("pelvis", 1 if w is not None and w.sigma_pelvis is not None else 0),
              ("balance", 1 if w is not None and w.sigma_balance is not None else 0), ("silhouette", N_SIL if has_sil else 0), ("cover", N_COVER if has_sil else 0),
              ("upright", 1 if has_sil else 0), ("hang", N_HANG if has_sil else 0)]
     sizes += [(nm, k) for nm, k, on in (("keypoints", N_KP, d.keypoints is not None), ("facing", N_FACING, d.facing is not None),
@@ -670,11 +670,11 @@ class Layout:
 
 #: Residuals per frame that depend on that frame alone: reprojection (16 x 2), torso distances, hinges,
 #: ankle below the floor (2), planted ankle off the floor (2), pose prior (head along the neck, 3; pelvis
-#: facing where the thorax faces, 3), the hips' fold (:func:`pelvis_depth`, 1; zero unless ``sigma_pelvis``); with
+#: facing where the thorax faces, 3); with ``sigma_pelvis`` the hips' fold (:func:`pelvis_depth`) 1 more, with
 #: ``sigma_balance`` the hips over the feet (:func:`balance_residual`) 1 more; with a silhouette, :data:`N_SIL` + :data:`N_COVER` + 1 + :data:`N_HANG` more,
 #: with a facing hint :data:`N_FACING` more, on a take with an opening T-pose :data:`N_TPOSE` more
 #: (:attr:`TakeProblem.n_frame_res`).
-N_FRAME_RES = N_JOINTS * 2 + len(TORSO_PAIRS) + len(HINGES) + 4 + 6 + 1
+N_FRAME_RES = N_JOINTS * 2 + len(TORSO_PAIRS) + len(HINGES) + 4 + 6
 #: With a facing hint (:attr:`TakeData.facing`), the residuals of a frame before the T-pose's: the thorax's and the
 #: pelvis's fronts against the hint's (:func:`facing_residual`)
 N_FACING = 6
@@ -781,10 +781,10 @@ class TakeProblem:
         neck = P[..., J["neck"], :]
         head = (unit(P[..., J["head"], :] - neck) - unit(neck - P[..., J["chest"], :])) / w.sigma_pose
         twist = (pelvis - thorax) / w.sigma_twist
-        pelvis_fold = (np.zeros(P.shape[:-2] + (1,)) if w.sigma_pelvis is None
-                       else ((pelvis_depth(P) - w.pelvis_depth) / w.sigma_pelvis)[..., None])
-        terms = [rep, torso, np.stack(hin, axis=-1), below, on, head, twist, pelvis_fold]
-        if w.sigma_balance is not None:  # its own row only when on: a zero row would change the solve's arithmetic
+        terms = [rep, torso, np.stack(hin, axis=-1), below, on, head, twist]
+        if w.sigma_pelvis is not None:  # the optional priors have their own rows only when on
+            terms.append(((pelvis_depth(P) - w.pelvis_depth) / w.sigma_pelvis)[..., None])
+        if w.sigma_balance is not None:
             terms.append(balance_residual(P, d, w)[0][..., None])
         if d.silhouette is not None:  # the silhouette's points, and the support: with them the feet's image rows fix the depth
             away = np.zeros(P.shape[0], bool) if d.away is None else np.asarray(d.away, dtype=bool)
