@@ -490,8 +490,8 @@ def balance_residual(P: np.ndarray, d: TakeData, w: "Weights") -> tuple[np.ndarr
     lies, 0 at the left ankle) and ``u`` (the unit direction from that point to the hips, camera frame) ``(..., n[, 3])``
     and the active mask."""
     shape = P.shape[:-2]
-    if w.sigma_balance is None or d.up is None:
-        return np.zeros(shape), {"on": np.zeros(shape, bool)}
+    if w.sigma_balance is None or d.up is None:  # off: every value the Jacobian reads, all zero
+        return np.zeros(shape), {"s": np.zeros(shape), "u": np.zeros(shape + (3,)), "on": np.zeros(shape, bool)}
     up = unit(np.asarray(d.up, dtype=np.float64))
     a, b, h = P[..., J["left_ankle"], :], P[..., J["right_ankle"], :], P[..., J["hips"], :]
     E, H = b - a, h - a
@@ -627,7 +627,7 @@ def seat_on_outline(P: np.ndarray, f: float, centre: np.ndarray, nf: np.ndarray,
     return P + (best - 1.0)[:, None, None] * P[:, None, 0]
 
 
-def frame_blocks(d: TakeData, w: "Weights | None" = None) -> dict[str, slice]:
+def frame_blocks(d: TakeData, w: "Weights") -> dict[str, slice]:
     """Where each kind of per-frame residual sits in a frame's block of :meth:`TakeProblem.frame_terms`, in order:
     the terms every take has, the pelvis's and the balance prior's rows with ``w.sigma_pelvis`` / ``w.sigma_balance``
     (``w``: the problem's :class:`Weights`), the silhouette's four with a silhouette, then the keypoints, the facing
@@ -635,8 +635,8 @@ def frame_blocks(d: TakeData, w: "Weights | None" = None) -> dict[str, slice]:
     (:meth:`TakeProblem.term_costs`) and their Jacobian (:func:`.take_jacobian.residual_jacobian`)."""
     has_sil = d.silhouette is not None
     sizes = [("reprojection", N_JOINTS * 2), ("torso", len(TORSO_PAIRS)), ("hinge", len(HINGES)), ("below_floor", 2),
-             ("contact", 2), ("pose", 6), ("pelvis", 1 if w is not None and w.sigma_pelvis is not None else 0),
-             ("balance", 1 if w is not None and w.sigma_balance is not None else 0), ("silhouette", N_SIL if has_sil else 0), ("cover", N_COVER if has_sil else 0),
+             ("contact", 2), ("pose", 6), ("pelvis", 0 if w.sigma_pelvis is None else 1),
+             ("balance", 0 if w.sigma_balance is None else 1), ("silhouette", N_SIL if has_sil else 0), ("cover", N_COVER if has_sil else 0),
              ("upright", 1 if has_sil else 0), ("hang", N_HANG if has_sil else 0)]
     sizes += [(nm, k) for nm, k, on in (("keypoints", N_KP, d.keypoints is not None), ("facing", N_FACING, d.facing is not None),
                                          ("tpose", N_TPOSE, d.holds_tpose)) if on]
