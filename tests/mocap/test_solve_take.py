@@ -548,13 +548,16 @@ def test_a_second_side_search_pass_redecides_what_the_first_left_behind(truth):
     it changed the body (a limb decided before the pelvis was mirrored). The sample's first 90 frames made exactly
     representable, the model's own points projected exactly, the true focal length: measured 26.9 mm mean joint
     error with one pass, 19.0 with two (exact 2D leaves the priors' bias and the search's misses, no noise). Without
-    the lean search (round 21), which these figures predate: with it both passes give 28.7 mm."""
+    the lean search (round 21), which these figures predate: with it both passes give 28.7 mm. Without the pieces of
+    runs cut at dips too (``side_split_cos``, round 28), which do much of what the second pass does: with them one pass
+    measures 20.8 mm, two 23.6."""
     P, uv, _, L = synthetic(truth, 90, start=0)
     tracked = np.ones(uv.shape[:2], bool)
 
     def error_mm(passes):
         out = solve_take_arrays(uv, tracked, L, int(truth["width"]), int(truth["height"]), float(truth["fps"]),
-                                SolveTakeParams(focal_px=700.0, side_search_passes=passes, lean_search=False))
+                                SolveTakeParams(focal_px=700.0, side_search_passes=passes, lean_search=False,
+                                                side_split_cos=None))
         return float(np.linalg.norm(out["camera_frame_joints"] - P, axis=-1).mean() * 1000.0)
 
     one, two = error_mm(1), error_mm(2)
@@ -741,3 +744,45 @@ def test_balance_residual_is_the_hips_across_the_floor_from_the_feet(truth):
     turned = P * np.array([-1.0, 1.0, -1.0])
     assert np.allclose(balance_residual(turned, d, Weights(sigma_balance=0.05, balance_band=0.0))[0], r0)
     assert not balance_residual(leaned, d, Weights())[0].any()  # off by default
+
+
+def test_dip_pieces_cut_a_run_where_the_bone_comes_back_towards_the_image_plane(truth):
+    """take_solver.dip_pieces: the sample's right forearm points out of the image plane on frames 81-209 of the truth
+    in one run (|cos| to the viewing ray above 0.12 throughout), coming back to |cos| 0.28 at frame 101: the run is
+    cut there, and nowhere when the dips must come nearer the plane than they do."""
+    from tbha_graph.mocap.reconstruct.take_solver import bone_cos, dip_pieces, flip_segments
+
+    P = truth["joints3d_cam"]
+    j = JOINT_INDEX["right_wrist"]
+    run = [s for s in flip_segments(P, j) if s[0] <= 101 <= s[-1]][0]
+    pieces = dip_pieces(P, j, run, 0.6)
+    assert [(int(p[0]), int(p[-1])) for p in pieces] == [(int(run[0]), 100), (101, int(run[-1]))]
+    assert 0.2 < np.abs(bone_cos(P, j)[101]) < 0.3
+    assert len(dip_pieces(P, j, run, 0.2)) == 1  # no dip that deep: the run whole
+
+
+def test_side_search_mirrors_a_piece_of_a_run_cut_at_a_dip(truth):
+    """A forearm put on the wrong depth side from frame 101 on (the sample's exact 2D, frames 85-124: its true run
+    dips to |cos| 0.28 at frame 101 without crossing the image plane, so the wrong body's run is one): mirroring the
+    whole run (the search without ``split_cos``) trades one wrong stretch for another, measured 17 of 40 frames left on
+    the wrong side and the wrist 159 mm off on average; mirroring the piece after the dip puts every frame back on
+    its side (measured 0, 21.7 mm)."""
+    from tbha_graph.mocap.reconstruct.take_solver import bone_cos, search_sides_lm
+
+    P, uv, centre, L = synthetic(truth, 40, start=85)
+    prob, d = problem(truth, P, uv, centre, L, Weights())
+    j = JOINT_INDEX["right_wrist"]
+    wrong = mirror(P, np.arange(16, 40), (j,), L)
+    g = globals_vector(700.0, d, False)
+    side = np.sign(bone_cos(P, j))
+
+    def searched(split_cos):
+        out, kept = search_sides_lm(prob, wrong, g, split_cos=split_cos, groups=((j,),))
+        return int(np.sum(np.sign(bone_cos(out, j)) != side)), 1000 * np.linalg.norm(out[:, j] - P[:, j], axis=-1).mean()
+
+    assert int(np.sum(np.sign(bone_cos(wrong, j)) != side)) == 24
+    whole_wrong, whole_mm = searched(None)
+    split_wrong, split_mm = searched(0.6)
+    print(f"whole runs: {whole_wrong} frames wrong, {whole_mm:.1f} mm; with pieces: {split_wrong}, {split_mm:.1f} mm")
+    assert whole_wrong >= 12 and whole_mm > 100  # measured 17, 159 mm
+    assert split_wrong == 0 and split_mm < 33  # measured 0, 21.7 mm

@@ -199,6 +199,15 @@ class SolveTakeParams(BaseModel):
                                     "x 3 solves (bench/solver_sweep.py --repeats 3) 100.0 / 97.9 mm (ranges 97.2-101.7 / "
                                     "97.1-98.9: within the scatter), the sample 50.9 / 53.2, turning takes 113.1 / 109.9; "
                                     "the solve 55 % slower; hence one by default")
+    side_split_cos: float | None = Field(0.6, gt=0, le=1, description="after each group's whole runs, the depth-side "
+                                         "search also decides the pieces of a bone's out-of-plane run on their own, cut "
+                                         "where the bone comes back towards the image plane (a local minimum of |cos| to "
+                                         "the viewing ray at most this) without crossing it: where the truth crosses, a "
+                                         "solve that kept one side shows only a dip (take_solver.dip_pieces); None: whole "
+                                         "runs only. Measured (round 28, bench/solver_sweep.py --repeats 3, None / 0.6): "
+                                         "all16 90.7 / 86.6 mm, fresh draws (--seed-offset 10) 85.9 / 85.0, turning takes "
+                                         "102.2 / 96.4 and 94.9 / 94.6; the solve about 30 % slower. Worse on MediaPipe's "
+                                         "keypoints (pipelines/mediapipe.yaml turns it off)")
     side_search_iterations: int = Field(3, ge=1, le=10, description="LM steps each depth-side candidate (a window as it "
                                         "is and mirrored) gets before their costs are compared")
     sigma_hang: float | None = Field(1.0, gt=0, description="with a silhouette, on frames where only the head is tracked "
@@ -506,7 +515,8 @@ def solve_frames(points, weight, lengths, centre, fps, P0, floor, g_start, p, it
     if side_search:
         g = prob.globals_of(x).copy()
         P = prob.solution(x)[4]
-        P, kept = search_sides(prob, P, g, iterations=p.side_search_iterations, passes=side_passes)
+        P, kept = search_sides(prob, P, g, iterations=p.side_search_iterations, passes=side_passes,
+                                split_cos=p.side_split_cos)
         if p.lean_search:  # the upper body's lean towards or away from the camera, window by window
             P, leans = search_leans_lm(prob, P, g)
             kept += leans

@@ -306,13 +306,34 @@ def descendants(j: int) -> list[int]:
     return out
 
 
+def bone_cos(P: np.ndarray, j: int) -> np.ndarray:
+    """Cosine ``(n,)`` between bone ``j`` (parent -> j) and the viewing ray to ``j``, ``P`` ``(n, 16, 3)`` camera
+    frame: 0 in the image plane, +1 pointing straight away from the camera."""
+    return np.sum(unit(P[:, j] - P[:, PARENTS[j]]) * unit(P[:, j]), axis=-1)
+
+
+def dip_pieces(P: np.ndarray, j: int, seg: np.ndarray, max_cos: float, rise: float = 0.1) -> list[np.ndarray]:
+    """``seg`` (a run of :func:`flip_segments`) cut where bone ``j`` comes back towards the image plane without
+    crossing it: at each local minimum of ``|cos|`` (:func:`bone_cos`) at most ``max_cos`` and at least ``rise``
+    below the run's highest ``|cos|`` on either side of it. A bone that really crosses the image plane there looks
+    so to a solve that kept it on one side; each piece can then be mirrored on its own. Returns the pieces (of at
+    least 2 frames; ``[seg]`` when there is no such dip)."""
+    c = np.abs(bone_cos(P, j)[seg])
+    if len(c) < 3:
+        return [seg]
+    before = np.maximum.accumulate(c)[:-2]  # the highest |cos| up to the frame before each interior frame
+    after = np.maximum.accumulate(c[::-1])[::-1][2:]  # ... and from the frame after it on
+    mid = c[1:-1]
+    dip = (mid <= max_cos) & (mid <= c[:-2]) & (mid < c[2:]) & (before - mid >= rise) & (after - mid >= rise)
+    pieces = [piece for piece in np.split(seg, np.flatnonzero(dip) + 1) if len(piece) >= 2]
+    return pieces if len(pieces) > 1 else [seg]
+
+
 def flip_segments(P: np.ndarray, j: int, min_tilt: float = 0.12) -> list[np.ndarray]:
     """Frame runs ``[frames, ...]`` where bone ``j`` (parent -> j) points clearly out of the image plane
     (``|cos|`` between the bone and the viewing ray above ``min_tilt``): the segments whose depth side can be
     flipped as a whole (between runs the bone crosses the image plane, where a flip costs nothing)."""
-    u = unit(P[:, j])
-    cos = np.sum(unit(P[:, j] - P[:, PARENTS[j]]) * u, axis=-1)
-    out = np.abs(cos) > min_tilt
+    out = np.abs(bone_cos(P, j)) > min_tilt
     segs, start = [], None
     for k, o in enumerate(np.append(out, False)):
         if o and start is None:
@@ -375,16 +396,35 @@ def mirror(P: np.ndarray, frames: np.ndarray, group: tuple[int, ...], lengths: n
     return trial
 
 
+def disjoint_batches(windows: list) -> list[list]:
+    """``windows`` ``[(lo, hi, ...), ...]`` put in batches of windows that do not overlap (each batch solved at once
+    by :func:`solve_candidates`, the next on what it left): greedily by ``lo``, each batch taking every window that
+    starts at or after the end of the one it took before."""
+    pending, out = sorted(windows, key=lambda w: w[0]), []
+    while pending:
+        batch, rest, end = [], [], -1
+        for w in pending:
+            (batch if w[0] >= end else rest).append(w)
+            end = w[1] if w[0] >= end else end
+        out.append(batch)
+        pending = rest
+    return out
+
+
 def search_sides_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, iterations: int = 3, margin: int = 2,
-                    groups: tuple[tuple[int, ...], ...] = SIDE_GROUPS, passes: int = 1) -> tuple[np.ndarray, int]:
+                    groups: tuple[tuple[int, ...], ...] = SIDE_GROUPS, passes: int = 1,
+                    split_cos: float | None = None) -> tuple[np.ndarray, int]:
     """Discrete search over depth sides with local re-optimisation: for each group of bones
     (:data:`SIDE_GROUPS`) and each out-of-plane run of frames (:func:`flip_segments`) the run is mirrored
     (:func:`mirror`); the current and the mirrored run (with ``margin`` frames either side) are re-optimised
     for ``iterations`` steps with the globals held — all windows of a group at once, as independent segments
     of one problem (``TakeData.breaks``) — and each mirror is kept when it ends cheaper than the current run.
     ``passes`` > 1 goes over the groups again, each group only where the mirrors kept since it was last searched
-    changed the body (a limb's side decided before its torso was turned is decided again after). Returns the
-    joints and the number of mirrors kept."""
+    changed the body (a limb's side decided before its torso was turned is decided again after). With
+    ``split_cos``, once a group's whole runs are decided, each piece of a run that dips towards the image plane
+    (:func:`dip_pieces`) is decided the same way on its own, in a window of its own (``margin`` frames either side;
+    the pieces' windows in batches that do not overlap, :func:`disjoint_batches`). Returns the joints and the number of
+    mirrors kept."""
     P = P.copy()
     L = prob.lengths_of(g)
     n = P.shape[0]
@@ -402,13 +442,20 @@ def search_sides_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, iterations:
             dirty[k] = False
             if not wins:
                 continue
-            picks = solve_candidates(prob, g, [(lo, hi, [P, mirror(P, seg, group, L)]) for lo, hi, seg in wins], iterations)
-            for (lo, hi, _), (outs, cost) in zip(wins, picks):
-                if cost[1] < cost[0]:
-                    P[lo:hi] = outs[1]
-                    kept += 1
-                    dirty[:, lo:hi] = True  # every group's sides on these frames: to decide again on the next pass
-                    dirty[k, lo:hi] = False
+            batches = [wins]  # the whole runs; then (split_cos) each piece of a run that dips towards the image plane
+            for b, batch in enumerate(batches):
+                picks = solve_candidates(prob, g, [(lo, hi, [P, mirror(P, seg, group, L)]) for lo, hi, seg in batch],
+                                         iterations)
+                for (lo, hi, _), (outs, cost) in zip(batch, picks):
+                    if cost[1] < cost[0]:
+                        P[lo:hi] = outs[1]
+                        kept += 1
+                        dirty[:, lo:hi] = True  # every group's sides on these frames: to decide again on the next pass
+                        dirty[k, lo:hi] = False
+                if b == 0 and split_cos is not None:
+                    batches += disjoint_batches([(max(piece[0] - margin, 0), min(piece[-1] + 1 + margin, n), piece)
+                                                 for _, _, seg in wins
+                                                 for piece in dip_pieces(P, group[0], seg, split_cos) if len(piece) < len(seg)])
     return P, kept
 
 
