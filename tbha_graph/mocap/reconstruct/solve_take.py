@@ -40,8 +40,10 @@ the three solver renders and the sample 62.9 -> 60.8, the six held-out takes 119
 3. **Depth sides.** A limb can lie in front of or behind its parent with the same image. For each group of
    bones (pelvis, thorax, each limb bone, head) and each run of frames where the bone points out of the
    image plane, the mirrored run and the current one are re-optimised together (all windows of a group in
-   one problem) and the mirror kept where it ends cheaper (:func:`.take_solver.search_sides_lm`); at the full
-   frame rate ``side_search_passes`` > 1 goes over the groups again where kept mirrors changed the body.
+   one problem) and the mirror kept where it ends cheaper (:func:`.take_solver.search_sides_lm`); then each
+   piece of a run cut where the bone dips towards the image plane without crossing it is decided the same way on
+   its own (``side_split_cos``, :func:`.take_solver.dip_pieces`); at the full frame rate ``side_search_passes`` > 1
+   goes over the groups again where kept mirrors changed the body.
 4. **Focal length.** The start with the lowest cost on the subsample wins. Its depth sides are then re-solved
    at the other starts' focal lengths, on the subsample too (``cross_seed``: each frame's body moved in depth
    so its image stays, :func:`moved_in_depth`), only to test whether the take determines the focal length:
