@@ -786,3 +786,17 @@ def test_side_search_mirrors_a_piece_of_a_run_cut_at_a_dip(truth):
     print(f"whole runs: {whole_wrong} frames wrong, {whole_mm:.1f} mm; with pieces: {split_wrong}, {split_mm:.1f} mm")
     assert whole_wrong >= 12 and whole_mm > 100  # measured 17, 159 mm
     assert split_wrong == 0 and split_mm < 33  # measured 0, 21.7 mm
+
+
+def test_disjoint_batches_never_put_overlapping_windows_together():
+    """take_solver.disjoint_batches: the pieces' windows (2 frames of margin either side, so neighbours overlap) go in
+    batches whose windows do not overlap, every window exactly once, the first batch taking all it can."""
+    from tbha_graph.mocap.reconstruct.take_solver import disjoint_batches
+
+    windows = [(0, 14, "a"), (10, 30, "b"), (26, 33, "c"), (31, 50, "d"), (60, 70, "e")]
+    batches = disjoint_batches(windows)
+    assert [[w[2] for w in b] for b in batches] == [["a", "c", "e"], ["b", "d"]]
+    for b in batches:
+        assert all(x[1] <= y[0] for x, y in zip(b, b[1:]))
+    assert sorted(w for b in batches for w in b) == sorted(windows)
+    assert disjoint_batches([]) == []
