@@ -318,7 +318,7 @@ def dip_pieces(P: np.ndarray, j: int, seg: np.ndarray, max_cos: float, rise: flo
     below the run's highest ``|cos|`` on either side of it. A bone that really crosses the image plane there looks
     so to a solve that kept it on one side; each piece can then be mirrored on its own. Returns the pieces (of at
     least 2 frames; ``[seg]`` when there is no such dip)."""
-    c = np.abs(bone_cos(P, j)[seg])
+    c = np.abs(bone_cos(P[seg], j))
     if len(c) < 3:
         return [seg]
     before = np.maximum.accumulate(c)[:-2]  # the highest |cos| up to the frame before each interior frame
@@ -430,6 +430,19 @@ def search_sides_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, iterations:
     n = P.shape[0]
     kept = 0
     dirty = np.ones((len(groups), n), dtype=bool)  # frames where each group's sides are still to be (re)decided
+
+    def decide(k: int, group: tuple[int, ...], wins: list) -> int:
+        """Mirror ``group`` on each window's frames ``(lo, hi, seg)`` (windows apart), keep the cheaper (in ``P``)."""
+        picks = solve_candidates(prob, g, [(lo, hi, [P, mirror(P, seg, group, L)]) for lo, hi, seg in wins], iterations)
+        mirrored = 0
+        for (lo, hi, _), (outs, cost) in zip(wins, picks):
+            if cost[1] < cost[0]:
+                P[lo:hi] = outs[1]
+                mirrored += 1
+                dirty[:, lo:hi] = True  # every group's sides on these frames: to decide again on the next pass
+                dirty[k, lo:hi] = False
+        return mirrored
+
     for _ in range(passes):
         for k, group in enumerate(groups):
             wins = []
@@ -442,20 +455,12 @@ def search_sides_lm(prob: TakeProblem, P: np.ndarray, g: np.ndarray, iterations:
             dirty[k] = False
             if not wins:
                 continue
-            batches = [wins]  # the whole runs; then (split_cos) each piece of a run that dips towards the image plane
-            for b, batch in enumerate(batches):
-                picks = solve_candidates(prob, g, [(lo, hi, [P, mirror(P, seg, group, L)]) for lo, hi, seg in batch],
-                                         iterations)
-                for (lo, hi, _), (outs, cost) in zip(batch, picks):
-                    if cost[1] < cost[0]:
-                        P[lo:hi] = outs[1]
-                        kept += 1
-                        dirty[:, lo:hi] = True  # every group's sides on these frames: to decide again on the next pass
-                        dirty[k, lo:hi] = False
-                if b == 0 and split_cos is not None:
-                    batches += disjoint_batches([(max(piece[0] - margin, 0), min(piece[-1] + 1 + margin, n), piece)
-                                                 for _, _, seg in wins
-                                                 for piece in dip_pieces(P, group[0], seg, split_cos) if len(piece) < len(seg)])
+            kept += decide(k, group, wins)  # the whole runs
+            if split_cos is not None:  # then each piece of a run that dips towards the image plane, on its own
+                pieces = [(max(piece[0] - margin, 0), min(piece[-1] + 1 + margin, n), piece) for _, _, seg in wins
+                          for piece in dip_pieces(P, group[0], seg, split_cos) if len(piece) < len(seg)]
+                for batch in disjoint_batches(pieces):
+                    kept += decide(k, group, batch)
     return P, kept
 
 
