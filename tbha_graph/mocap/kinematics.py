@@ -1,4 +1,4 @@
-"""Forward kinematics, vectorised over frames (BVH semantics).
+"""Forward kinematics (BVH semantics) and the two-bone inverse kinematics of a leg, vectorised over frames.
 
 Quaternions are scipy-ordered ``(x, y, z, w)`` ``(..., 4)`` float64; their arithmetic is
 :mod:`tbha_graph.mocap.quat` (the project's one quaternion module).
@@ -76,3 +76,43 @@ def forward_kinematics(
         world[:, j] = quat_mul(world[:, p], local_quat[:, j])
         positions[:, j] = positions[:, p] + quat_apply(world[:, p], off)
     return positions, world
+
+
+def _unit_rows(v: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(n > 1e-12, n, 1.0)
+
+
+def two_bone_ik(
+    hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, target: np.ndarray, forward: np.ndarray,
+    lengths: tuple | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Move knee and ankle so the ankle reaches ``target``, keeping both bone lengths; all (m, 3), any length unit.
+    ``lengths``: ``(thigh, shin)`` (scalars or (m,)) to keep instead of the chain's own ``|knee - hip|``,
+    ``|ankle - knee|`` (when ``hip`` is not where the chain hung from).
+
+    The knee is placed in the plane through ``hip``, the new ankle and the original ``knee`` (its
+    original bend plane). Where the original leg is nearly straight (the knee within 5 % of the thigh
+    length of the hip-target line) that direction is blended towards ``forward`` (unit, (m, 3)), so
+    the knee bends forward. Targets out of reach (farther than thigh + shin, or closer than their
+    difference) are clamped along the hip-target line. Returns ``(knee, ankle, clamped)`` with
+    ``clamped`` (m,) bool.
+    """
+    if lengths is None:
+        l1, l2 = np.linalg.norm(knee - hip, axis=-1), np.linalg.norm(ankle - knee, axis=-1)
+    else:
+        l1, l2 = (np.broadcast_to(np.asarray(v, dtype=np.float64), hip.shape[:1]) for v in lengths)
+    d = target - hip
+    dist = np.linalg.norm(d, axis=-1)
+    lo, hi = np.abs(l1 - l2) + 1e-9, l1 + l2
+    clamped = (dist < lo) | (dist > hi)
+    reach = np.clip(dist, lo, hi)
+    u = np.where((dist > 1e-12)[:, None], d / np.where(dist > 1e-12, dist, 1.0)[:, None], _unit_rows(ankle - hip))
+    a = (l1**2 - l2**2 + reach**2) / (2.0 * reach)
+    h = np.sqrt(np.maximum(l1**2 - a**2, 0.0))
+    pole = (knee - hip) - np.einsum("mi,mi->m", knee - hip, u)[:, None] * u
+    fwd = forward - np.einsum("mi,mi->m", forward, u)[:, None] * u
+    alpha = np.clip(np.linalg.norm(pole, axis=-1) / (0.05 * l1), 0.0, 1.0)[:, None]
+    side = _unit_rows(alpha * _unit_rows(pole) + (1.0 - alpha) * _unit_rows(fwd))
+    new_knee = hip + a[:, None] * u + h[:, None] * side
+    return new_knee, hip + reach[:, None] * u, clamped

@@ -9,8 +9,9 @@ import pytest
 from pydantic import ValidationError
 
 from tbha_graph.core.testing import run_node
+from tbha_graph.mocap.kinematics import two_bone_ik
 from tbha_graph.mocap.filter.foot_contact import (
-    LEGS, FootContactParams, clean_contacts, detect_contacts, floor_height, foot_contact, runs, two_bone_ik,
+    LEGS, FootContactParams, clean_contacts, detect_contacts, floor_height, foot_contact, runs,
 )
 from tbha_graph.mocap.io.skeleton_map import motion16_from_bvh
 from tbha_graph.mocap.skeleton import JOINT_INDEX

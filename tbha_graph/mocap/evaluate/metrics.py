@@ -39,6 +39,7 @@ With ground truth (``truth`` connected and not ``{}``):
 
 Floor and camera (no ground truth needed): ``floor_penetration_mm`` (worst ankle below its resting height
 above the floor y = 0), ``foot_skate_mm`` (mean horizontal movement per frame of a planted ankle),
+``export_floor_penetration_mm`` and ``export_foot_skate_mm`` (the same for the exported joints, when given),
 ``focal_px``; with a truth camera ``focal_err_pct`` and ``camera_height_err_m``.
 
 A figure that cannot be computed (e.g. jitter of a clip shorter than 4 frames) is ``null``.
@@ -209,6 +210,11 @@ def compute_metrics(
     quality, reproj = quality_figures(joints, fps, tracks, camera)
     metrics.update(quality)
     metrics.update(floor_figures(joints, fps))
+    out = None
+    if exported is not None:  # what the user gets: the BVH's joints (rotations fitted, hinge limits, FK)
+        out = np.asarray(exported["joints"], dtype=np.float64)
+        _same_length(n, out.shape[0], "the exported joints")
+        metrics.update({f"export_{k}": v for k, v in floor_figures(out, fps).items()})
     metrics.update(camera_figures(camera, truth if truth else None))
     if "inferred" in motion:  # samples filled by filter.fill_gaps; the rest of the untracked ones are missing
         inferred = np.asarray(motion["inferred"], dtype=bool)
@@ -247,9 +253,7 @@ def compute_metrics(
             raw_figures, _ = truth_figures(raw, fps, truth, alignment)
             metrics["raw_mpjpe_mm"] = raw_figures["mpjpe_mm"]
             metrics["raw_accel_error_m_s2"] = raw_figures["accel_error_m_s2"]
-        if exported is not None:  # what the user gets: the BVH's joints (rotations fitted, hinge limits, FK)
-            out = np.asarray(exported["joints"], dtype=np.float64)
-            _same_length(n, out.shape[0], "the exported joints")
+        if out is not None:
             export_figures, _ = truth_figures(out, fps, truth, alignment)
             metrics["export_mpjpe_mm"] = export_figures["mpjpe_mm"]
             metrics["export_pa_mpjpe_mm"] = export_figures["pa_mpjpe_mm"]
@@ -259,7 +263,7 @@ def compute_metrics(
 
 @node(
     "evaluate.metrics",
-    version=5,
+    version=6,
     inputs={
         "motion": MOTION,
         "tracks": TRACKS2D,

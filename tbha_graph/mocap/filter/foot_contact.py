@@ -34,6 +34,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.node import node
 from ..ports import MOTION, REPORT
+from ..kinematics import two_bone_ik
 from ..skeleton import JOINT_INDEX
 from ..bundles.motion import motion_joints, with_joints
 
@@ -155,41 +156,11 @@ def lock_targets(ankle: np.ndarray, contact: np.ndarray, blend: int) -> tuple[np
 
 
 # ---------------------------------------------------------------------------------------------
-# two-bone IK
+# locking the feet (two-bone IK: tbha_graph.mocap.kinematics.two_bone_ik)
 # ---------------------------------------------------------------------------------------------
 def _unit(v: np.ndarray) -> np.ndarray:
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.where(n > 1e-12, n, 1.0)
-
-
-def two_bone_ik(
-    hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray, target: np.ndarray, forward: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Move knee and ankle so the ankle reaches ``target``, keeping both bone lengths; all (m, 3).
-
-    The knee is placed in the plane through ``hip``, the new ankle and the original ``knee`` (its
-    original bend plane). Where the original leg is nearly straight (the knee within 5 % of the thigh
-    length of the hip-target line) that direction is blended towards ``forward`` (unit, (m, 3)), so
-    the knee bends forward. Targets out of reach (farther than thigh + shin, or closer than their
-    difference) are clamped along the hip-target line. Returns ``(knee, ankle, clamped)`` with
-    ``clamped`` (m,) bool.
-    """
-    l1 = np.linalg.norm(knee - hip, axis=-1)
-    l2 = np.linalg.norm(ankle - knee, axis=-1)
-    d = target - hip
-    dist = np.linalg.norm(d, axis=-1)
-    lo, hi = np.abs(l1 - l2) + 1e-9, l1 + l2 - 1e-9
-    clamped = (dist < lo) | (dist > hi)
-    reach = np.clip(dist, lo, hi)
-    u = np.where((dist > 1e-12)[:, None], d / np.where(dist > 1e-12, dist, 1.0)[:, None], _unit(ankle - hip))
-    a = (l1**2 - l2**2 + reach**2) / (2.0 * reach)
-    h = np.sqrt(np.maximum(l1**2 - a**2, 0.0))
-    pole = (knee - hip) - np.einsum("mi,mi->m", knee - hip, u)[:, None] * u
-    fwd = forward - np.einsum("mi,mi->m", forward, u)[:, None] * u
-    alpha = np.clip(np.linalg.norm(pole, axis=-1) / (0.05 * l1), 0.0, 1.0)[:, None]
-    side = _unit(alpha * _unit(pole) + (1.0 - alpha) * _unit(fwd))
-    new_knee = hip + a[:, None] * u + h[:, None] * side
-    return new_knee, hip + reach[:, None] * u, clamped
 
 
 def facing(joints: np.ndarray) -> np.ndarray:

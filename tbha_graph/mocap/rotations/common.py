@@ -73,6 +73,11 @@ class SolverParams(BaseModel):
     )
     end_length: float = Field(0.1, gt=0, le=1, description="End Site length of head and wrists", json_schema_extra={"unit": "m"})
     foot_length: float = Field(0.15, gt=0, le=1, description="End Site length of the ankles (a foot pointing forward)", json_schema_extra={"unit": "m"})
+    feet_reach: bool = Field(
+        True, description="bend the knees so the ankles land on the motion's, from where the rigid pelvis puts the hip joints "
+                          "(two-bone IK in the motion's knee plane: the feet stay where they were planted); false: thigh and shin "
+                          "swung to the motion's directions, the feet moved by the pelvis's miss"
+    )
 
     @property
     def references(self) -> dict[int, TorsoReference]:

@@ -22,6 +22,7 @@ from ..ports import MOTION, ROTATIONS
 from ..rigid import procrustes
 from ..skeleton import CHILDREN
 from .common import SolverParams, empty_world, rest_directions, rest_skeleton, rotations_bundle, solve_swings
+from .reach import reach_feet
 from .rest import TORSO
 
 
@@ -56,11 +57,11 @@ def kabsch_rotations(joints: np.ndarray, fps: float, params: KabschParams | None
         w = np.array([float(_subtree_size(k)) if p.weights == "subtree" else 1.0 for k in c])
         r = kabsch(offsets[c], joints[:, c] - joints[:, j : j + 1], w)
         world[:, j] = Rotation.from_matrix(r).as_quat()
-    solve_swings(world, joints, rest_directions(offsets), p)
+    solve_swings(world, reach_feet(world, joints, offsets) if p.feet_reach else joints, rest_directions(offsets), p)
     return rotations_bundle(world, joints, offsets, fps, p)
 
 
-@node("rotations.kabsch", version=1, inputs={"motion": MOTION}, outputs={"rotations": ROTATIONS}, params=KabschParams)
+@node("rotations.kabsch", version=2, inputs={"motion": MOTION}, outputs={"rotations": ROTATIONS}, params=KabschParams)
 def kabsch_node(ctx, motion):
     """Joint rotations from 3D joint positions by least-squares (Kabsch) alignment of the torso, hinge limbs."""
     joints, fps = motion_joints(motion)

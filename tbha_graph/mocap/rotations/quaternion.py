@@ -25,6 +25,7 @@ from ..bundles.motion import motion_joints
 from ..ports import MOTION, ROTATIONS
 from .common import SolverParams, empty_world, rest_directions, rest_skeleton, rotations_bundle, solve_swings
 from ..quat import rotation_from_pairs
+from .reach import reach_feet
 from .rest import TORSO, TorsoReference, rest_points, torso_vectors
 
 
@@ -51,11 +52,11 @@ def quaternion_rotations(joints: np.ndarray, fps: float, params: SolverParams | 
     world = empty_world(joints.shape[0])
     for j, q in torso_rotations(joints, offsets, p.references).items():
         world[:, j] = q
-    solve_swings(world, joints, rest_directions(offsets), p)
+    solve_swings(world, reach_feet(world, joints, offsets) if p.feet_reach else joints, rest_directions(offsets), p)
     return rotations_bundle(world, joints, offsets, fps, p)
 
 
-@node("rotations.quaternion", version=1, inputs={"motion": MOTION}, outputs={"rotations": ROTATIONS}, params=QuaternionParams)
+@node("rotations.quaternion", version=2, inputs={"motion": MOTION}, outputs={"rotations": ROTATIONS}, params=QuaternionParams)
 def quaternion(ctx, motion):
     """Joint rotations (BVH-ready) from 3D joint positions by the seed 002 quaternion method with hinge limits."""
     joints, fps = motion_joints(motion)
