@@ -204,6 +204,22 @@ def compared(name: str, value: float, before: dict[str, float], worse: list[bool
     return lines
 
 
+def solver_sets(items: list[str]) -> dict:
+    """``--set FIELD=VALUE`` items (YAML values) -> ``{field: value}`` of ``reconstruct.solve_take``'s params, checked
+    by its model; ``ValueError`` naming the bad item."""
+    params = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or key not in st.SolveTakeParams.model_fields:
+            raise ValueError(f"--set {item!r}: expected FIELD=VALUE with FIELD one of reconstruct.solve_take's params")
+        params[key] = yaml.safe_load(value)
+    try:
+        st.SolveTakeParams(**params)
+    except ValueError as e:  # pydantic's ValidationError
+        raise ValueError(f"--set: {e}") from None
+    return params
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n")[0])
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
@@ -233,16 +249,10 @@ def main(argv: list[str] | None = None) -> None:
         except (OSError, ValueError) as e:
             ap.error(f"--against: {e}")
     worse: list[bool] = []
-    params = {}
-    for item in args.set:
-        key, sep, value = item.partition("=")
-        if not sep or key not in st.SolveTakeParams.model_fields:
-            ap.error(f"--set {item!r}: expected FIELD=VALUE with FIELD one of reconstruct.solve_take's params")
-        params[key] = yaml.safe_load(value)
-    try:  # a bad value fails here, before minutes of solving
-        st.SolveTakeParams(**params)
-    except ValueError as e:  # pydantic's ValidationError
-        ap.error(f"--set: {e}")
+    try:  # a bad name or value fails here, before minutes of solving
+        params = solver_sets(args.set)
+    except ValueError as e:
+        ap.error(str(e))
     consistent: tuple[str, ...] = ()
     if args.consistent_patches:
         consistent = PATCHED_JOINTS if args.consistent_patches == "all" else tuple(args.consistent_patches.split(","))
