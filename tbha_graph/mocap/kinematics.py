@@ -78,7 +78,8 @@ def forward_kinematics(
     return positions, world
 
 
-def _unit_rows(v: np.ndarray) -> np.ndarray:
+def unit_rows(v: np.ndarray) -> np.ndarray:
+    """Rows of ``v`` ``(..., 3)`` scaled to unit length; rows shorter than 1e-12 are left as they are."""
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.where(n > 1e-12, n, 1.0)
 
@@ -107,12 +108,12 @@ def two_bone_ik(
     lo, hi = np.abs(l1 - l2) + 1e-9, l1 + l2
     clamped = (dist < lo) | (dist > hi)
     reach = np.clip(dist, lo, hi)
-    u = np.where((dist > 1e-12)[:, None], d / np.where(dist > 1e-12, dist, 1.0)[:, None], _unit_rows(ankle - hip))
+    u = np.where((dist > 1e-12)[:, None], d / np.where(dist > 1e-12, dist, 1.0)[:, None], unit_rows(ankle - hip))
     a = (l1**2 - l2**2 + reach**2) / (2.0 * reach)
     h = np.sqrt(np.maximum(l1**2 - a**2, 0.0))
     pole = (knee - hip) - np.einsum("mi,mi->m", knee - hip, u)[:, None] * u
     fwd = forward - np.einsum("mi,mi->m", forward, u)[:, None] * u
     alpha = np.clip(np.linalg.norm(pole, axis=-1) / (0.05 * l1), 0.0, 1.0)[:, None]
-    side = _unit_rows(alpha * _unit_rows(pole) + (1.0 - alpha) * _unit_rows(fwd))
+    side = unit_rows(alpha * unit_rows(pole) + (1.0 - alpha) * unit_rows(fwd))
     new_knee = hip + a[:, None] * u + h[:, None] * side
     return new_knee, hip + reach[:, None] * u, clamped

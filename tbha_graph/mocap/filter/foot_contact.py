@@ -34,7 +34,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.node import node
 from ..ports import MOTION, REPORT
-from ..kinematics import two_bone_ik
+from ..kinematics import two_bone_ik, unit_rows
 from ..skeleton import JOINT_INDEX
 from ..bundles.motion import motion_joints, with_joints
 
@@ -158,16 +158,11 @@ def lock_targets(ankle: np.ndarray, contact: np.ndarray, blend: int) -> tuple[np
 # ---------------------------------------------------------------------------------------------
 # locking the feet (two-bone IK: tbha_graph.mocap.kinematics.two_bone_ik)
 # ---------------------------------------------------------------------------------------------
-def _unit(v: np.ndarray) -> np.ndarray:
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.where(n > 1e-12, n, 1.0)
-
-
 def facing(joints: np.ndarray) -> np.ndarray:
     """Unit facing direction (n, 3) of the pelvis: (left hip - right hip) x (chest - hips)."""
     lateral = joints[:, JOINT_INDEX["left_hip"]] - joints[:, JOINT_INDEX["right_hip"]]
     up = joints[:, JOINT_INDEX["chest"]] - joints[:, JOINT_INDEX["hips"]]
-    return _unit(np.cross(lateral, up))
+    return unit_rows(np.cross(lateral, up))
 
 
 def lock_feet(joints: np.ndarray, contacts: dict[str, np.ndarray], blend: int) -> tuple[np.ndarray, dict]:
