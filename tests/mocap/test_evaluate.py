@@ -267,3 +267,14 @@ def test_extra_reports_join_the_metrics_without_overwriting(scene):
                    truth=scene["truth"], extra={"foot_sliding_after_mm": 0.2, "frames": -1, "per_joint": {"a": 1}})
     res = out["metrics"]
     assert res["foot_sliding_after_mm"] == 0.2 and res["frames"] == N and "per_joint" not in res
+
+
+def test_the_solvers_unseen_frames_are_doubtful_in_the_metrics(scene):
+    """The solver's ``unseen_ranges`` (nothing of the actor seen) reach ``doubtful_ranges`` as 'not seen' and the
+    error plot's per-frame flags; without them no frame is flagged so."""
+    args = dict(motion=motion(scene["joints"]), tracks=scene["tracks"], camera=scene["camera"].to_model(), truth=scene["truth"])
+    out = run_node(metrics, {}, **args, extra={"unseen_ranges": [[N - 5, N - 1]]})
+    assert [r for r in out["metrics"]["doubtful_ranges"] if r[2] == "not seen"] == [[N - 5, N - 1, "not seen"]]
+    assert (out["errors"]["doubtful"][N - 5:] > 0).all()
+    plain = run_node(metrics, {}, **args, extra={})
+    assert not [r for r in plain["metrics"]["doubtful_ranges"] if r[2] == "not seen"]

@@ -800,3 +800,26 @@ def test_disjoint_batches_never_put_overlapping_windows_together():
         assert all(x[1] <= y[0] for x, y in zip(b, b[1:]))
     assert sorted(w for b in batches for w in b) == sorted(windows)
     assert disjoint_batches([]) == []
+
+
+def test_frames_with_nothing_seen_are_a_warning_and_doubtful(truth):
+    """An actor who leaves the picture: frames with no point tracked (and no silhouette or keypoint) are reported
+    (``unseen_ranges``), a run of 10 or more is a warning that reaches the user, and the metrics flag those frames
+    'not seen' in ``doubtful_ranges``; a shorter run is reported and flagged, not warned about."""
+    from tbha_graph.core.node import Context
+    from tbha_graph.mocap.evaluate.doubtful import doubtful_bits, doubtful_ranges
+    from tbha_graph.mocap.reconstruct.solve_take import solve_take as spec
+
+    P, uv, centre, L = synthetic(truth, 40, start=0)
+    for last, warned in ((12, True), (6, False)):
+        tracked = np.ones(uv.shape[:2], bool)
+        tracked[-last:] = False  # out of the picture on the last frames
+        tracked[10, :3] = False  # a frame with some points lost is still seen
+        tracks = {"points": uv, "tracked": tracked, "width": np.asarray(640), "height": np.asarray(480),
+                  "fps": np.asarray(float(truth["fps"]))}
+        ctx = Context(spec.type, spec.params.model_validate(QUICK_NODE_PARAMS))
+        out = spec.fn(ctx, tracks=dict(tracks), body=None)
+        assert out["report"]["unseen_ranges"] == [[40 - last, 39]]
+        assert any(f"nothing of the actor is seen on frames {40 - last}-39" in w for w in ctx.warnings) == warned
+        bits = doubtful_bits(40, tracks, None, None, out["report"]["unseen_ranges"])
+        assert [r for r in doubtful_ranges(bits) if r[2] == "not seen"] == [[40 - last, 39, "not seen"]]

@@ -12,7 +12,10 @@ Reasons (bits of a per-frame ``int``; the first four come from the tracker's ``d
 * ``high residual``: the tracked patches were far from where the tracker predicted them;
 * ``unfilled gap``: some 3D joint neither tracked nor filled (``filter.fill_gaps`` leaves gaps longer
   than its ``max_gap_frames`` unfilled instead of inventing motion);
-* ``high reprojection``: the frame's mean reprojection error is above 3 x the take's median and 10 px.
+* ``high reprojection``: the frame's mean reprojection error is above 3 x the take's median and 10 px;
+* ``not seen``: nothing of the actor seen (no point tracked, no detector keypoint, no silhouette: out of the
+  picture): the solver's motion there is extrapolated from the frames either side (``reconstruct.solve_take``'s
+  report ``unseen_ranges``).
 
 ``doubtful_ranges``: ``[[first, last, reason], ...]`` (rows of the take, 0-based, ``last`` included),
 one list per reason's runs, sorted by ``first``.
@@ -23,13 +26,17 @@ import numpy as np
 
 from ..track.common import DOUBT
 
-REASONS: dict[str, int] = {**DOUBT, "unfilled gap": 16, "high reprojection": 32}
+REASONS: dict[str, int] = {**DOUBT, "unfilled gap": 16, "high reprojection": 32, "not seen": 64}
 
 
-def doubtful_bits(n: int, tracks: dict, motion: dict | None = None, reprojection: np.ndarray | None = None) -> np.ndarray:
+def doubtful_bits(n: int, tracks: dict, motion: dict | None = None, reprojection: np.ndarray | None = None,
+                  unseen: list | None = None) -> np.ndarray:
     """Per-frame reason bits ``(n,)`` int64 (module docstring) from the tracks' ``doubtful``, the motion's
-    ``tracked``/``inferred`` flags and the per-frame reprojection error (px)."""
+    ``tracked``/``inferred`` flags, the per-frame reprojection error (px) and the ``unseen`` ranges ``[[first,
+    last], ...]`` (rows, ``last`` included) of the solver's report."""
     bits = np.zeros(n, np.int64)
+    for first, last in unseen or []:
+        bits[max(int(first), 0):max(int(last) + 1, 0)] |= REASONS["not seen"]
     if "doubtful" in tracks and np.shape(tracks["doubtful"]) == (n,):
         bits |= np.asarray(tracks["doubtful"], dtype=np.int64)
     if motion is not None and "inferred" in motion and "tracked" in motion:

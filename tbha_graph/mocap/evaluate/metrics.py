@@ -194,11 +194,12 @@ def patch_figures(joints: np.ndarray, points: np.ndarray, truth: dict, alignment
 
 def compute_metrics(
     motion: dict, tracks: dict, camera, truth: dict | None = None, raw_motion: dict | None = None, alignment: str = "rigid",
-    exported: dict | None = None,
+    exported: dict | None = None, unseen: list | None = None,
 ) -> tuple[dict, dict[str, np.ndarray]]:
     """The ``metrics`` dict and the ``errors`` bundle (see module docstring). ``camera`` is a
     :class:`~tbha_graph.mocap.camera.Camera`; ``truth`` ``None`` or ``{}`` means no ground truth;
-    ``exported``: ``export.joints3d``'s bundle (its ``joints``: where the BVH puts every joint), scored too."""
+    ``exported``: ``export.joints3d``'s bundle (its ``joints``: where the BVH puts every joint), scored too;
+    ``unseen``: the solver's ``unseen_ranges`` (frames with nothing of the actor seen: ``not seen`` in ``doubtful_ranges``)."""
     joints, fps = _joints(motion, "motion")
     n = joints.shape[0]
     points = np.asarray(tracks["points"], dtype=np.float64)
@@ -224,7 +225,7 @@ def compute_metrics(
     nan = np.full(n, np.nan)
     errors = {"mpjpe_mm": nan, "mpjpe_root_mm": nan, "pa_mpjpe_mm": nan, "error_2d_px": nan, "reprojection_px": reproj,
               "fps": np.asarray(fps, dtype=np.float64)}
-    doubt = doubtful_bits(n, tracks, motion, reproj)  # issue 13: frames whose labelling/result is doubtful
+    doubt = doubtful_bits(n, tracks, motion, reproj, unseen)  # issue 13: frames whose labelling/result is doubtful
     metrics["doubtful_ranges"] = doubtful_ranges(doubt)
     errors["doubtful"] = doubt.astype(np.float64)
 
@@ -263,7 +264,7 @@ def compute_metrics(
 
 @node(
     "evaluate.metrics",
-    version=6,
+    version=7,
     inputs={
         "motion": MOTION,
         "tracks": TRACKS2D,
@@ -285,7 +286,9 @@ def metrics(ctx, motion, tracks, camera, truth, raw_motion, extra, exported):
     Output ``metrics``: flat dict (units in the key names: _mm, _px, _pct, _m_s3...), plus the nested
     ``per_joint_mpjpe_mm``. Output ``errors``: per-frame arrays (see tbha_graph.mocap.evaluate.metrics).
     """
-    result, errors = compute_metrics(motion, tracks, camera.camera(), truth, raw_motion, ctx.params.alignment, exported)
+    unseen = extra.get("unseen_ranges") if isinstance(extra, dict) else None  # the solver's frames with nothing seen
+    result, errors = compute_metrics(motion, tracks, camera.camera(), truth, raw_motion, ctx.params.alignment, exported,
+                                     unseen if isinstance(unseen, list) else None)
     if isinstance(extra, dict):
         result.update({k: v for k, v in extra.items() if isinstance(v, (int, float, str, bool)) and k not in result})
         notes = [w for w in extra.get("warnings", []) if isinstance(w, str)]

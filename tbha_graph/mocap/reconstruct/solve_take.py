@@ -120,6 +120,7 @@ from ..bundles.tracks import read_tracks
 from ..calibrate.pnp import solve_pnp_planar
 from ..camera import Camera
 from ..ports import BODY, CAMERA, LENS, MOTION, SIDES, SILHOUETTE, TRACKS2D, report_port
+from ..runs import runs_of
 from ..skeleton import JOINT_NAMES, N_JOINTS, PARENTS, TORSO_JOINTS, torso_unseen
 from ..body import DEFAULT_ANKLE_HEIGHT, body_lengths, lengths_to_body, tpose_on_floor
 from ..tpose import find_tpose
@@ -459,6 +460,24 @@ def hints_on(hints: dict | None, rows) -> dict | None:
     return None if hints is None else {k: v[rows] for k, v in hints.items()}
 
 
+#: A run of at least this many frames with nothing of the actor seen (:func:`unseen_frames`) is a warning
+UNSEEN_WARN_FRAMES = 10
+
+
+def unseen_frames(tracked: np.ndarray, silhouette: SilhouetteField | None, hints: dict | None) -> np.ndarray:
+    """``(n,)`` bool: frames where nothing of the actor is seen: no point tracked (``tracked`` ``(n, 16)``), no detector
+    keypoint weighed (``hints["kp_weight"]``, if any) and, with a ``silhouette``, an empty one (all-zero field). The
+    solve's motion there comes from its priors alone (acceleration): extrapolated from the frames either side."""
+    out = ~np.asarray(tracked, dtype=bool).any(axis=1)
+    if hints is not None and "kp_weight" in hints:
+        out &= ~(np.asarray(hints["kp_weight"]) > 0).any(axis=1)
+    if silhouette is not None:
+        fields = np.asarray(silhouette.distance)
+        empty = ~fields.reshape(fields.shape[0], -1).any(axis=1)
+        out &= empty[np.asarray(silhouette.index)]
+    return out
+
+
 def facing_away(weight: np.ndarray) -> np.ndarray:
     """Frames ``(n,)`` where the head's point is tracked but none of the torso's (weights ``(n, 16)``): the suit's
     patches are on the body's front, so there the torso faces away from the camera."""
@@ -752,6 +771,12 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
     if hints is not None and "tpose" in hints:  # frames held to the opening T-pose (sigma_tpose)
         report["tpose_prior_frames"] = int(np.sum(hints["tpose"]))
     warnings_out: list[str] = []
+    unseen = unseen_frames(tracked, sil, hints)
+    report["unseen_ranges"] = [[int(r[0]), int(r[-1])] for r in runs_of(unseen, min_len=1)]
+    for r in runs_of(unseen, min_len=UNSEEN_WARN_FRAMES):
+        warnings_out.append(f"nothing of the actor is seen on frames {r[0]}-{r[-1]} ({len(r) / fps:.1f} s: no patch, "
+                            "no keypoint, no silhouette — out of the picture?): the 3D motion there is extrapolated "
+                            "from the frames either side, not measured ('not seen' in doubtful_ranges)")
     # for each starting focal length (or the known one): a first skeleton; on a frame subsample spread over
     # the take, LM, the depth-side search and LM again; then every frame from that solution (interpolated),
     # LM with the focal length and floor free. The start whose whole-take cost is lowest wins.
