@@ -160,3 +160,31 @@ def test_cover_term_finds_a_leg_swung_into_depth():
     assert np.abs(r_true).max() == 0.0
     assert (np.abs(r_swung) > 1.0).sum(axis=1).min() >= 4  # measured 5 samples per frame beyond 1 sigma
     assert not cover_residuals(swung, 700.0, centre, sil, L, w, mask=np.zeros(10))[0].any()  # masked frames: none
+
+
+def test_cover_term_ignores_where_the_image_edge_cuts_the_outline():
+    """An actor walking out of view: where the image's left edge cuts the silhouette the outline runs along the edge
+    (no edge of the body there) and only a hand may be left in view (an outline a few pixels tall). The true pose
+    covers its outline on those frames too: the edge's samples are left out and the tolerance keeps the height of
+    the last whole frame (before, the true pose paid for the edge and for a 'body' 20 px tall)."""
+    from tbha_graph.mocap.reconstruct.take_model import cover_residuals
+
+    with np.load(TRUTH, allow_pickle=False) as z:
+        P = z["joints3d_cam"][40:50].copy()
+    centre = np.array([319.5, 239.5])
+    f = 700.0
+    x_right = (f * P[..., 0] / P[..., 2]).max(axis=1)  # each frame's rightmost joint, px from the centre
+    # frames 0-4 whole in view; 5-9 moved left until only 40, 30, 20, 10, 5 px of the body are left in view
+    left = np.array([0.0] * 5 + [40.0, 30.0, 20.0, 10.0, 5.0])
+    shift_px = np.where(left > 0, -(x_right + centre[0]) + left, 0.0)
+    P[..., 0] += (shift_px * P[:, 0, 2] / f)[:, None]
+    uv = f * P[..., :2] / P[..., 2:3] + centre
+    sil = thin_silhouettes(uv, width=9)
+    q, height = sil.outline()
+    L = np.r_[0.0, np.median(np.linalg.norm(P[:, 1:] - P[:, [0, 1, 2, 1, 4, 5, 1, 7, 8, 0, 10, 11, 0, 13, 14]], axis=-1), axis=0)]
+    r, _ = cover_residuals(P, f, centre, sil, L, Weights())
+    assert np.isfinite(q[:5]).all() and height[:5].min() > 150  # whole frames: every sample, the body's height
+    assert np.isnan(q[5:, :, 0]).any(axis=1).all()  # cut frames: the edge's samples left out ...
+    assert (np.nan_to_num(q[5:, :, 0], nan=99.0) > 1.0).all()  # ... and none left on the edge
+    assert np.allclose(height[5:], height[4])  # the nearest whole frame's height
+    assert np.abs(r).max() == 0.0  # the true pose covers its outline on every frame

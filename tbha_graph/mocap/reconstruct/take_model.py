@@ -317,12 +317,18 @@ class SilhouetteField:
     def outline(self, rows=slice(None)) -> tuple[np.ndarray, np.ndarray]:
         """The outline on the frames ``rows``: :data:`N_COVER` points ``(k, N_COVER, 2)`` full-resolution px evenly
         spaced along the largest silhouette region's outer contour, and its height ``(k,)`` px (top to bottom
-        row); NaN points and 0 height on a frame without a silhouette (an all-zero field: the actor not seen)."""
+        row); NaN points and 0 height on a frame without a silhouette (an all-zero field: the actor not seen).
+
+        Where the image's edge cuts the silhouette (the actor partly out of view) the contour runs along the edge:
+        those samples are NaN (the body goes on beyond it, no edge of the body is there), and the height, which
+        sets the cover term's tolerance, is at least that of the nearest frame whose silhouette is whole (a
+        foot left in view is not a body 30 px tall)."""
         if "outline" not in self.cache:
             import cv2
 
             m = self.distance.shape[0]
             pts, height = np.full((m, N_COVER, 2), np.nan), np.zeros(m)
+            cut = np.zeros(m, dtype=bool)  # frames whose silhouette the image's edge cuts
             for i in range(m):
                 D = self.distance[i]
                 if not D.any():
@@ -336,6 +342,15 @@ class SilhouetteField:
                 closed = np.vstack([c, c[:1]])
                 pts[i] = np.stack([np.interp(at, arc, closed[:, 0]), np.interp(at, arc, closed[:, 1])], axis=1)
                 height[i] = np.ptp(c[:, 1]) + 1.0
+                h, w = D.shape
+                on_edge = lambda q: (q[:, 0] < 1.0) | (q[:, 0] > w - 2.0) | (q[:, 1] < 1.0) | (q[:, 1] > h - 2.0)  # noqa: E731
+                cut[i] = on_edge(c).any()
+                pts[i, on_edge(pts[i])] = np.nan
+            whole = np.flatnonzero(~cut & (height > 0))
+            cut_rows = np.flatnonzero(cut)
+            if len(cut_rows) and len(whole):  # each cut frame's height at least its nearest whole frame's
+                nearest = whole[np.abs(whole[None, :] - cut_rows[:, None]).argmin(axis=1)]
+                height[cut_rows] = np.maximum(height[cut_rows], height[nearest])
             self.cache["outline"] = ((pts + 0.5) / self.scale - 0.5, height / self.scale)
         pts, height = self.cache["outline"]
         idx = np.asarray(self.index)[rows]
