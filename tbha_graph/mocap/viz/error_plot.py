@@ -77,7 +77,7 @@ def plot_errors(errors: dict, path, title: str = "", dpi: int = 120):
         for k, (first, last) in enumerate(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1)):
             for ax in axes:  # a run covers its frames' whole intervals
                 ax.axvspan((first - 0.5) / fps, (last + 0.5) / fps, color=style.rgb(style.DOUBTFUL_BGR), alpha=0.18, lw=0,
-                           label="doubtful labelling" if (k == 0 and ax is axes[0]) else None)
+                           label="doubtful frames (doubtful_ranges)" if (k == 0 and ax is axes[0]) else None)
     for ax in axes:
         ax.set_xlim(0.0, max(t[-1], 1.0 / fps))
         ax.set_ylim(bottom=0.0)
