@@ -295,6 +295,13 @@ def cover_segments(lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return a, b
 
 
+def on_image_edge(q: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """``(p,)`` bool: which points ``q`` ``(p, 2)`` (x, y pixels of an image of ``shape`` (rows, columns)) lie on its
+    outermost pixels (within 1 px of the edge)."""
+    h, w = shape
+    return (q[:, 0] < 1.0) | (q[:, 0] > w - 2.0) | (q[:, 1] < 1.0) | (q[:, 1] > h - 2.0)
+
+
 @dataclass
 class SilhouetteField:
     """The actor's silhouette per frame as a distance-outside field (``segment.silhouette``): ``distance``
@@ -342,10 +349,8 @@ class SilhouetteField:
                 closed = np.vstack([c, c[:1]])
                 pts[i] = np.stack([np.interp(at, arc, closed[:, 0]), np.interp(at, arc, closed[:, 1])], axis=1)
                 height[i] = np.ptp(c[:, 1]) + 1.0
-                h, w = D.shape
-                on_edge = lambda q: (q[:, 0] < 1.0) | (q[:, 0] > w - 2.0) | (q[:, 1] < 1.0) | (q[:, 1] > h - 2.0)  # noqa: E731
-                cut[i] = on_edge(c).any()
-                pts[i, on_edge(pts[i])] = np.nan
+                cut[i] = on_image_edge(c, D.shape).any()
+                pts[i, on_image_edge(pts[i], D.shape)] = np.nan
             whole = np.flatnonzero(~cut & (height > 0))
             cut_rows = np.flatnonzero(cut)
             if len(cut_rows) and len(whole):  # each cut frame's height at least its nearest whole frame's
