@@ -472,9 +472,7 @@ def unseen_frames(tracked: np.ndarray, silhouette: SilhouetteField | None, hints
     if hints is not None and "kp_weight" in hints:
         out &= ~(np.asarray(hints["kp_weight"]) > 0).any(axis=1)
     if silhouette is not None:
-        fields = np.asarray(silhouette.distance)
-        empty = ~fields.reshape(fields.shape[0], -1).any(axis=1)
-        out &= empty[np.asarray(silhouette.index)]
+        out &= ~silhouette.seen()
     return out
 
 

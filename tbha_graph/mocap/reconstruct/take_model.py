@@ -354,12 +354,19 @@ class SilhouetteField:
             whole = np.flatnonzero(~cut & (height > 0))
             cut_rows = np.flatnonzero(cut)
             if len(cut_rows) and len(whole):  # each cut frame's height at least its nearest whole frame's
-                nearest = whole[np.abs(whole[None, :] - cut_rows[:, None]).argmin(axis=1)]
+                after = np.clip(np.searchsorted(whole, cut_rows), 1, len(whole) - 1) if len(whole) > 1 else np.zeros_like(cut_rows)
+                before = np.maximum(after - 1, 0)
+                nearest = np.where(cut_rows - whole[before] <= whole[after] - cut_rows, whole[before], whole[after])
                 height[cut_rows] = np.maximum(height[cut_rows], height[nearest])
             self.cache["outline"] = ((pts + 0.5) / self.scale - 0.5, height / self.scale)
         pts, height = self.cache["outline"]
         idx = np.asarray(self.index)[rows]
         return pts[idx], height[idx]
+
+    def seen(self, rows=slice(None)) -> np.ndarray:
+        """``(k,)`` bool: whether the frames ``rows`` have a silhouette at all (an all-zero field: the actor not seen)."""
+        D = np.asarray(self.distance)
+        return D.reshape(D.shape[0], -1).any(axis=1)[np.asarray(self.index)[rows]]
 
     def bottom_rows(self, rows=slice(None)) -> np.ndarray:
         """``(k,)`` the silhouette's lowest row on the frames ``rows`` (NaN where unknown)."""
