@@ -237,6 +237,34 @@ def test_metrics_error_plot_and_overlay_show_doubtful_frames(tmp_path):
     for i, flagged in ((5, True), (1, False)):
         frame = draw_overlay(np.full((H, W, 3), 90, np.uint8), i, layers, sizes)
         assert tuple(frame[H - 1, W // 2]) == (style.DOUBTFUL_BGR if flagged else (90, 90, 90))
+    # with evaluate.metrics' errors connected, every reason of doubtful_ranges is framed, not only the tracker's
+    # (here the solver's "not seen" on frame 9, which the tracks do not flag)
+    from tbha_graph.mocap.evaluate.doubtful import REASONS
+
+    errors = {**out["errors"], "doubtful": out["errors"]["doubtful"].copy()}
+    errors["doubtful"][9] = REASONS["not seen"]
+    with_metrics = OverlayLayers(n, probe_video(path), tracks, None, None, None, True, errors)
+    for i, flagged in ((5, True), (9, True), (1, False)):
+        frame = draw_overlay(np.full((H, W, 3), 90, np.uint8), i, with_metrics, sizes)
+        assert tuple(frame[H - 1, W // 2]) == (style.DOUBTFUL_BGR if flagged else (90, 90, 90))
+    assert tuple(draw_overlay(np.full((H, W, 3), 90, np.uint8), 9, layers, sizes)[H - 1, W // 2]) == (90, 90, 90)
+    with pytest.raises(NodeError, match="errors 'doubtful'"):
+        OverlayLayers(n, probe_video(path), tracks, None, None, None, True, {"doubtful": np.zeros(n - 1)})
+
+
+def test_the_pipelines_overlays_show_the_metrics_doubtful_frames():
+    """Every pipeline that draws an overlay and writes metrics.json hands the overlay the metrics' doubtful frames."""
+    import yaml
+
+    checked = 0
+    for path in sorted((Path(__file__).resolve().parents[2] / "pipelines").glob("*.yaml")):
+        nodes = yaml.safe_load(path.read_text())["nodes"]
+        checked += any(d.get("type") == "viz.overlay" for d in nodes.values())
+        for name, decl in nodes.items():
+            if decl.get("type") == "viz.overlay" and any(d.get("type") == "evaluate.metrics" for d in nodes.values()):
+                metrics = next(k for k, d in nodes.items() if d.get("type") == "evaluate.metrics")
+                assert decl["inputs"].get("doubtful") == f"{metrics}.errors", f"{path.name}: {name}"
+    assert checked >= 3  # default, mediapipe, seed
 
 
 SEED_SAMPLE = Path(__file__).resolve().parents[2] / "data" / "sample_seed"

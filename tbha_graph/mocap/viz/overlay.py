@@ -9,8 +9,10 @@ Layers, bottom to top (colours in :mod:`tbha_graph.mocap.viz.style`):
 * ground truth (optional ``truth``): thin green crosses at the truth's ``joints2d`` (rescaled to the
   video size), wider than the dots so they show where the tracks are right;
 * a legend (top left) and a frame counter with the time (bottom left);
-* on frames the tracker flags doubtful (the tracks' ``doubtful``, see
-  :mod:`tbha_graph.mocap.evaluate.doubtful`): an orange frame border and the reasons (top right).
+* on doubtful frames: an orange frame border and the reasons (top right). With ``doubtful`` connected
+  (``evaluate.metrics``' ``errors``) every reason of metrics.json's ``doubtful_ranges`` (the tracker's, unfilled
+  gaps, high reprojection, the actor not seen); without it the tracker's own (the tracks' ``doubtful``); see
+  :mod:`tbha_graph.mocap.evaluate.doubtful`.
 
 Frames are streamed one at a time (never the whole video in memory) and written with
 :func:`tbha_graph.mocap.io.video_writer.open_video_writer` (H.264 with PyAV, else mp4v with a logged note).
@@ -28,7 +30,7 @@ from ...core.node import node, optional
 from ..bundles.truth import truth_joints2d
 from ..io.video import iter_frames
 from ..io.video_writer import open_video_writer
-from ..ports import CAMERA, MOTION, TRACKS2D, TRUTH, VIDEO, VIDEO_FILE, VideoClip
+from ..ports import CAMERA, ERRORS, MOTION, TRACKS2D, TRUTH, VIDEO, VIDEO_FILE, VideoClip
 from ..skeleton import N_JOINTS
 from . import draw, style
 
@@ -60,9 +62,12 @@ def _check_frames(n: int, array: np.ndarray, what: str, tail: tuple[int, ...]) -
 class OverlayLayers:
     """Everything drawn on the frames, checked once: ``points``/``tracked`` (n, 16, 2)/(n, 16) of the
     tracks, optional ``reprojected`` (n, 16, 2) px and ``truth2d`` (n, 16, 2) px; ``lost_at`` (n, 16, 2) px
-    where each lost joint's ring goes (the reprojection where finite, else the tracker's prediction)."""
+    where each lost joint's ring goes (the reprojection where finite, else the tracker's prediction); ``doubtful``
+    (n,) reason bits (:data:`tbha_graph.mocap.evaluate.doubtful.REASONS`) from ``errors`` (``evaluate.metrics``'
+    per-frame errors: every reason) if given, else from the tracks (the tracker's reasons), or None."""
 
-    def __init__(self, n: int, clip: VideoClip, tracks: dict, motion: dict | None, camera, truth: dict | None, draw_truth: bool):
+    def __init__(self, n: int, clip: VideoClip, tracks: dict, motion: dict | None, camera, truth: dict | None, draw_truth: bool,
+                 errors: dict | None = None):
         self.points = _check_frames(n, tracks["points"], "tracks 'points'", (N_JOINTS, 2)).astype(np.float64)
         self.tracked = _check_frames(n, tracks["tracked"], "tracks 'tracked'", (N_JOINTS,)).astype(bool)
         if (motion is None) != (camera is None):
@@ -80,7 +85,9 @@ class OverlayLayers:
         if self.reprojected is not None:
             self.lost_at = np.where(np.isfinite(self.reprojected).all(-1, keepdims=True), self.reprojected, self.points)
         self.doubtful = None
-        if "doubtful" in tracks and np.shape(tracks["doubtful"]) == (n,):
+        if errors and "doubtful" in errors:
+            self.doubtful = _check_frames(n, errors["doubtful"], "errors 'doubtful'", ()).astype(np.int64)
+        elif "doubtful" in tracks and np.shape(tracks["doubtful"]) == (n,):
             self.doubtful = np.asarray(tracks["doubtful"], dtype=np.int64)
         self.truth2d = None
         if truth and draw_truth:
@@ -117,25 +124,27 @@ def draw_overlay(frame: np.ndarray, i: int, layers: OverlayLayers, sizes: draw.S
 
 @node(
     "viz.overlay",
-    version=1,
+    version=2,
     inputs={
         "video": VIDEO,
         "tracks": TRACKS2D,
         "motion": optional(MOTION, "3D motion to reproject and draw (needs 'camera')"),
         "camera": optional(CAMERA, "camera of the motion"),
         "truth": optional(TRUTH, "ground truth (io.ground_truth); {} = none"),
+        "doubtful": optional(ERRORS, "evaluate.metrics' per-frame errors: their doubtful frames and reasons (all of "
+                             "metrics.json's doubtful_ranges) framed in orange; without it, the tracker's"),
     },
     outputs={"video": VIDEO_FILE},
     params=OverlayParams,
 )
-def overlay(ctx, video, tracks, motion, camera, truth):
+def overlay(ctx, video, tracks, motion, camera, truth, doubtful):
     """Draw the 2D tracks (filled dots: tracked; hollow: lost, where the 3D puts them), the reprojected 3D skeleton and the
     ground truth on the video, with a legend and frame counter; writes an H.264 mp4 (same size, fps
     and frame count as the input clip)."""
     p: OverlayParams = ctx.params
     clip = video if isinstance(video, VideoClip) else VideoClip.model_validate(video)
     n = clip.n_frames
-    layers = OverlayLayers(n, clip, tracks, motion, camera, truth, p.draw_truth)
+    layers = OverlayLayers(n, clip, tracks, motion, camera, truth, p.draw_truth, doubtful)
     sizes = draw.Sizes.for_frame(clip.height, p.dot_radius, p.line_width)
     entries = layers.legend()
     path = ctx.output_path("overlay.mp4")
