@@ -746,6 +746,40 @@ def test_balance_residual_is_the_hips_across_the_floor_from_the_feet(truth):
     assert not balance_residual(leaned, d, Weights())[0].any()  # off by default
 
 
+def test_hip_extension_residual_is_a_thigh_swung_behind_the_body(truth):
+    """``take_model.hip_extension_residual`` (the optional hip limit, ``sigma_hip``): the sample's CMU walk never
+    swings a thigh behind the pelvis's frontal plane (the three CMU clips: a dot product with its front of -0.27 at
+    most), so at
+    ``hip_back_cos`` 0.6 it costs nothing; the right thigh swung 60 degrees behind (the knee where a knee raised in
+    front of someone facing away would project) costs sin(60) - 0.6 over sigma on every frame, the left nothing;
+    turning the whole take round changes nothing."""
+    from scipy.spatial.transform import Rotation
+
+    from tbha_graph.mocap.reconstruct.take_model import THIGHS, Weights, fronts, hip_extension_residual, unit
+    from tbha_graph.mocap.reconstruct.take_solver import descendants
+
+    P = truth["joints3d_world"]
+    w = Weights(sigma_hip=0.05, hip_back_cos=0.6)
+    pelvis = fronts(P)[1]
+    assert not hip_extension_residual(P, pelvis, w).any()
+    dots = [np.sum(unit(P[:, k] - P[:, h]) * pelvis, axis=-1) for h, k in THIGHS]
+    assert -0.02 < min(d.min() for d in dots) < 0.02  # measured -0.0005: a walk never swings a thigh behind
+    hip, knee = THIGHS[1]
+    swung = P.copy()
+    side = unit(P[:, THIGHS[0][0]] - P[:, hip])  # the pelvis's left: the axis a thigh swings back about
+    for t in range(len(P)):  # the right thigh straight down, then 60 degrees behind
+        down = -unit(P[t, 1] - P[t, 0])
+        back = Rotation.from_rotvec(np.radians(60.0) * side[t]).apply(down)  # about the left axis: backwards
+        shift = P[t, hip] + back * np.linalg.norm(P[t, knee] - P[t, hip]) - P[t, knee]
+        swung[t, [knee] + descendants(knee)] += shift
+    r = hip_extension_residual(swung, fronts(swung)[1], w)
+    assert not r[:, 0].any()
+    expected = (0.6 - np.sin(np.radians(60.0))) / 0.05  # -5.32 (the swing's axis is the hip joints' line, not quite the front's normal)
+    assert abs(np.median(r[:, 1]) - expected) < 0.07 and np.abs(r[:, 1] - expected).max() < 0.6  # measured 0.05 / 0.44
+    turned = swung * np.array([-1.0, 1.0, -1.0])
+    np.testing.assert_allclose(hip_extension_residual(turned, fronts(turned)[1], w), r)
+
+
 def test_dip_pieces_cut_a_run_where_the_bone_comes_back_towards_the_image_plane(truth):
     """take_solver.dip_pieces: the sample's right forearm points out of the image plane on frames 81-209 of the truth
     in one run (|cos| to the viewing ray above 0.12 throughout), coming back to |cos| 0.28 at frame 101: the run is

@@ -20,10 +20,11 @@ from tbha_graph.mocap.reconstruct.take_model import (DEFAULT_POINT_OFFSETS, HING
 from tbha_graph.mocap.segment.silhouette import distance_outside
 
 TRUTH = Path(__file__).resolve().parents[2] / "data" / "sample" / "ground_truth.npz"
-B = N_FRAME_RES + 2  # with the pelvis and balance priors' rows (this test turns both on)
+B = N_FRAME_RES + 4  # with the pelvis, balance and hip-extension priors' rows (this test turns them on)
 KINDS = {"reprojection": slice(0, 32), "torso": slice(32, 32 + len(TORSO_PAIRS)),
          "hinge": slice(43, 43 + len(HINGES)), "below_floor": slice(47, 49), "contact": slice(49, 51),
-         "head": slice(51, 54), "twist": slice(54, 57), "pelvis": slice(57, 58), "balance": slice(58, 59), "silhouette": slice(B, B + N_SIL - 4),
+         "head": slice(51, 54), "twist": slice(54, 57), "pelvis": slice(57, 58), "balance": slice(58, 59),
+         "hip_extension": slice(59, 61), "silhouette": slice(B, B + N_SIL - 4),
          "support": slice(B + N_SIL - 4, B + N_SIL - 3), "away": slice(B + N_SIL - 3, B + N_SIL - 1),
          "bottom": slice(B + N_SIL - 1, B + N_SIL), "cover": slice(B + N_SIL, B + N_SIL + N_COVER),
          "upright": slice(B + N_SIL + N_COVER, B + N_SIL + N_COVER + 1),
@@ -88,7 +89,7 @@ def test_analytic_frame_jacobian_equals_central_differences():
     data = TakeData(uv, weight, L, centre, fps, 0.08, contact, rest_pair_distances(L, 0.08),
                     silhouette=thin_silhouettes(joints_uv, ghost=60.0), away=np.arange(n) % 2 == 0, up=-nf, facing=facing,
                     keypoints=kp, kp_weight=kp_weight, tpose=np.arange(n) < 12)
-    prob = TakeProblem(data, bone_directions(P), nf, Weights(sigma_twist=0.2, sigma_pelvis=0.01, sigma_balance=0.05, balance_band=0.05, support_band=-0.03, upright_sin=0.15,
+    prob = TakeProblem(data, bone_directions(P), nf, Weights(sigma_twist=0.2, sigma_pelvis=0.01, sigma_balance=0.05, balance_band=0.05, sigma_hip=0.05, hip_back_cos=0.1, support_band=-0.03, upright_sin=0.15,
                                                           sigma_hang=0.5),
                        DEFAULT_POINT_OFFSETS.copy(), free_offsets=False)
     g = np.array([np.log(700.0), 0.0, 0.0, d - 0.04])  # the floor 4 cm up: some ankles below it
@@ -123,6 +124,8 @@ def test_analytic_frame_jacobian_equals_central_differences():
     assert (np.abs(kpr) > prob.w.robust_scale).any()
     fac = prob.frame_terms(Pj, g)[:, KINDS["facing"]]
     assert not fac[3::7, 3:].any() and (np.abs(fac[::5]) > prob.w.robust_scale).any()  # missing hints cost nothing; mirrored ones beyond the scale
+    hip = prob.frame_terms(Pj, g)[:, KINDS["hip_extension"]]
+    assert 0.12 < (hip < 0).mean() < 0.28  # thighs turned behind the body on some frames (bones turned ~20 degrees): measured 0.18
     tp = prob.frame_terms(Pj, g)[:, KINDS["tpose"]]
     assert (np.abs(tp[:12]).sum(axis=1) > 1.0).all() and not tp[12:].any()  # only on the T-pose's frames (a walk: far from it)
     cover = prob.frame_terms(Pj, g)[:, KINDS["cover"]]

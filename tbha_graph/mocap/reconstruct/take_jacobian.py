@@ -19,7 +19,7 @@ import numpy as np
 
 from ..skeleton import N_JOINTS, PARENTS
 from .take_model import (ANKLES, AXIS_TRIPLES, HANG_BONES, HINGES, J, N_BONES, N_COVER, N_KP, PELVIS_JOINTS,
-                         PELVIS_SIDE, PER_FRAME, SIL_PAIRS, THORAX_JOINTS, TORSO_PAIRS, TPOSE_PAIRS, TakeProblem, balance_residual,
+                         PELVIS_SIDE, PER_FRAME, SIL_PAIRS, THIGHS, THORAX_JOINTS, TORSO_PAIRS, TPOSE_PAIRS, TakeProblem, balance_residual,
                          bottom_residual,
                          cover_residuals, cover_segments, hang_residual, keypoint_targets, robust_slope, sil_residuals,
                          torso_unseen, unit,
@@ -166,6 +166,17 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
         out[:, row, J["left_ankle"]] -= (1.0 - bal["s"])[:, None] * k
         out[:, row, J["right_ankle"]] -= bal["s"][:, None] * k
         row += 1
+    # the thighs behind the pelvis's front: min(u . f + c, 0) / sigma, u = unit(knee - hip joint), f the pelvis's front
+    if w.sigma_hip is not None:
+        for k, (hj, kn) in enumerate(THIGHS):
+            u, U = unit_jacobian(P[:, kn] - P[:, hj])
+            active = ((np.sum(u * pelvis, axis=-1) + w.hip_back_cos < 0.0) / w.sigma_hip)[:, None]
+            gk = (pelvis[:, None, :] @ U)[:, 0] * active
+            out[:, row + k, kn] += gk
+            out[:, row + k, hj] -= gk
+            for jj, Dj in zip(PELVIS_JOINTS, d_pelvis):
+                out[:, row + k, jj] += (u[:, None, :] @ Dj)[:, 0] * active
+        row += len(THIGHS)
     if d.silhouette is not None:
         sil = _silhouette(prob, P, g, rows)
         for k, (a, b) in enumerate(SIL_PAIRS):

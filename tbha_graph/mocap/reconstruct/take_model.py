@@ -224,6 +224,8 @@ class Weights:
     pelvis_depth: float = -0.03  # around this (metres; negative: behind it), :func:`pelvis_depth`
     sigma_balance: float | None = None  # the hips farther across the floor than balance_band from the ankles' segment (None: off)
     balance_band: float = 0.2    # metres, :func:`balance_residual`
+    sigma_hip: float | None = None  # a thigh swung behind the pelvis's frontal plane by more than hip_back_cos (unit vectors'
+    hip_back_cos: float = 0.6    # dot product with the pelvis's front) costs ((dot + hip_back_cos) / sigma_hip)² (None: off)
     contact_band: float = 0.03   # a planted ankle may rise this far above its standing height (heel and toe roll), metres
     sigma_offset: float = 0.03   # point offsets around their defaults, metres
     robust_scale: float = 2.0    # reprojection residuals beyond this many sigmas count as soft-L1 (outliers)
@@ -532,6 +534,21 @@ def balance_residual(P: np.ndarray, d: TakeData, w: "Weights") -> tuple[np.ndarr
             {"s": s, "u": D / np.maximum(dist, 1e-12)[..., None], "on": on})
 
 
+#: The thighs ``(hip joint, knee)`` of the hip's extension limit (:func:`hip_extension_residual`)
+THIGHS = ((J["left_hip"], J["left_knee"]), (J["right_hip"], J["right_knee"]))
+
+
+def hip_extension_residual(P: np.ndarray, pelvis: np.ndarray, w: "Weights") -> np.ndarray:
+    """Each thigh swung behind the body ``(..., n, 2)``: ``min(unit(knee - hip joint) . pelvis + hip_back_cos, 0) /
+    sigma_hip``, ``pelvis`` the pelvis's front ``(..., n, 3)`` (:func:`fronts`), joints ``P`` ``(..., n, 16, 3)``.
+    A hip extends about 20-30 degrees behind the frontal plane; the renders' CMU takes keep the dot product above
+    -0.27 on every frame (walks, a hop, a kick). The image does not: a knee raised in front of someone who faces
+    away from the camera projects where a thigh swung as far behind them would, and the limbs' hang prior of such
+    frames prefers the lower, wrong one."""
+    u = unit(np.stack([P[..., k, :] - P[..., h, :] for h, k in THIGHS], axis=-2))
+    return np.minimum(np.sum(u * pelvis[..., None, :], axis=-1) + w.hip_back_cos, 0.0) / w.sigma_hip
+
+
 #: Limb bones (by child joint) the hang prior (:func:`hang_residual`) pulls towards straight down.
 HANG_BONES = np.array([J[n] for n in ("left_elbow", "left_wrist", "right_elbow", "right_wrist",
                                       "left_knee", "left_ankle", "right_knee", "right_ankle")])
@@ -663,7 +680,8 @@ def frame_blocks(d: TakeData, w: "Weights") -> dict[str, slice]:
     has_sil = d.silhouette is not None
     sizes = [("reprojection", N_JOINTS * 2), ("torso", len(TORSO_PAIRS)), ("hinge", len(HINGES)), ("below_floor", 2),
              ("contact", 2), ("pose", 6), ("pelvis", 0 if w.sigma_pelvis is None else 1),
-             ("balance", 0 if w.sigma_balance is None else 1), ("silhouette", N_SIL if has_sil else 0), ("cover", N_COVER if has_sil else 0),
+             ("balance", 0 if w.sigma_balance is None else 1), ("hip_extension", 0 if w.sigma_hip is None else len(THIGHS)),
+             ("silhouette", N_SIL if has_sil else 0), ("cover", N_COVER if has_sil else 0),
              ("upright", 1 if has_sil else 0), ("hang", N_HANG if has_sil else 0)]
     sizes += [(nm, k) for nm, k, on in (("keypoints", N_KP, d.keypoints is not None), ("facing", N_FACING, d.facing is not None),
                                          ("tpose", N_TPOSE, d.holds_tpose)) if on]
@@ -698,7 +716,8 @@ class Layout:
 #: Residuals per frame that depend on that frame alone: reprojection (16 x 2), torso distances, hinges,
 #: ankle below the floor (2), planted ankle off the floor (2), pose prior (head along the neck, 3; pelvis
 #: facing where the thorax faces, 3); with ``sigma_pelvis`` the hips' fold (:func:`pelvis_depth`) 1 more, with
-#: ``sigma_balance`` the hips over the feet (:func:`balance_residual`) 1 more; with a silhouette, :data:`N_SIL` + :data:`N_COVER` + 1 + :data:`N_HANG` more,
+#: ``sigma_balance`` the hips over the feet (:func:`balance_residual`) 1 more, with ``sigma_hip`` the thighs'
+#: extension limit (:func:`hip_extension_residual`) 2 more; with a silhouette, :data:`N_SIL` + :data:`N_COVER` + 1 + :data:`N_HANG` more,
 #: with a facing hint :data:`N_FACING` more, on a take with an opening T-pose :data:`N_TPOSE` more
 #: (:attr:`TakeProblem.n_frame_res`).
 N_FRAME_RES = N_JOINTS * 2 + len(TORSO_PAIRS) + len(HINGES) + 4 + 6
@@ -813,6 +832,8 @@ class TakeProblem:
             terms.append(((pelvis_depth(P) - w.pelvis_depth) / w.sigma_pelvis)[..., None])
         if w.sigma_balance is not None:
             terms.append(balance_residual(P, d, w)[0][..., None])
+        if w.sigma_hip is not None:
+            terms.append(hip_extension_residual(P, pelvis, w))
         if d.silhouette is not None:  # the silhouette's points, and the support: with them the feet's image rows fix the depth
             away = np.zeros(P.shape[0], bool) if d.away is None else np.asarray(d.away, dtype=bool)
             to_cam = [-unit(P[..., J["chest"], :]), -unit(P[..., J["hips"], :])]
