@@ -762,7 +762,8 @@ def test_hip_extension_residual_is_a_thigh_swung_behind_the_body(truth):
     P = truth["joints3d_world"]
     w = Weights(sigma_hip=0.05, hip_back_cos=0.6)
     pelvis = fronts(P)[1]
-    assert not hip_extension_residual(P, pelvis, w).any()
+    away = np.ones(len(P), bool)  # only the head tracked: where the limit applies
+    assert not hip_extension_residual(P, pelvis, w, away).any()
     dots = [np.sum(unit(P[:, k] - P[:, h]) * pelvis, axis=-1) for h, k in THIGHS]
     assert -0.02 < min(d.min() for d in dots) < 0.02  # measured -0.0005: a walk never swings a thigh behind
     hip, knee = THIGHS[1]
@@ -773,12 +774,15 @@ def test_hip_extension_residual_is_a_thigh_swung_behind_the_body(truth):
         back = Rotation.from_rotvec(np.radians(60.0) * side[t]).apply(down)  # about the left axis: backwards
         shift = P[t, hip] + back * np.linalg.norm(P[t, knee] - P[t, hip]) - P[t, knee]
         swung[t, [knee] + descendants(knee)] += shift
-    r = hip_extension_residual(swung, fronts(swung)[1], w)
+    r = hip_extension_residual(swung, fronts(swung)[1], w, away)
     assert not r[:, 0].any()
     expected = (0.6 - np.sin(np.radians(60.0))) / 0.05  # -5.32 (the swing's axis is the hip joints' line, not quite the front's normal)
     assert abs(np.median(r[:, 1]) - expected) < 0.07 and np.abs(r[:, 1] - expected).max() < 0.6  # measured 0.05 / 0.44
     turned = swung * np.array([-1.0, 1.0, -1.0])
-    np.testing.assert_allclose(hip_extension_residual(turned, fronts(turned)[1], w), r)
+    np.testing.assert_allclose(hip_extension_residual(turned, fronts(turned)[1], w, away), r)
+    seen = np.arange(len(P)) % 3 == 0  # frames with patches tracked: never charged
+    np.testing.assert_array_equal(hip_extension_residual(swung, fronts(swung)[1], w, ~seen), np.where(seen[:, None], 0.0, r))
+    assert not hip_extension_residual(swung, fronts(swung)[1], w, None).any()
 
 
 def test_dip_pieces_cut_a_run_where_the_bone_comes_back_towards_the_image_plane(truth):

@@ -125,7 +125,7 @@ def test_analytic_frame_jacobian_equals_central_differences():
     fac = prob.frame_terms(Pj, g)[:, KINDS["facing"]]
     assert not fac[3::7, 3:].any() and (np.abs(fac[::5]) > prob.w.robust_scale).any()  # missing hints cost nothing; mirrored ones beyond the scale
     hip = prob.frame_terms(Pj, g)[:, KINDS["hip_extension"]]
-    assert 0.12 < (hip < 0).mean() < 0.28  # thighs turned behind the body on some frames (bones turned ~20 degrees): measured 0.18
+    assert 0.09 < (hip[::2] < 0).mean() < 0.2 and not hip[1::2].any()  # thighs behind the body on some frames flagged away (measured 0.13), none elsewhere
     tp = prob.frame_terms(Pj, g)[:, KINDS["tpose"]]
     assert (np.abs(tp[:12]).sum(axis=1) > 1.0).all() and not tp[12:].any()  # only on the T-pose's frames (a walk: far from it)
     cover = prob.frame_terms(Pj, g)[:, KINDS["cover"]]

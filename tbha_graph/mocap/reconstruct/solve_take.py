@@ -175,18 +175,18 @@ class SolveTakeParams(BaseModel):
     balance_band_m: float = Field(0.2, ge=0, le=1.0, description="with sigma_balance: how far across the floor the hips may "
                                   "be from the ankles' segment at no cost, metres (the renders' CMU takes: at most 0.21; 0.15: all16 88.1 / 88.6 mm, "
                                   "the held-out full turn worse)")
-    sigma_hip: float | None = Field(None, gt=0, description="a thigh swung behind the pelvis's frontal plane: (dot of the thigh's "
-                                    "direction with the pelvis's front + hip_back_cos) / sigma_hip where negative "
+    sigma_hip: float | None = Field(0.05, gt=0, description="with a silhouette, on frames where only the head is tracked (the back "
+                                    "to the camera): a thigh swung behind the pelvis's frontal plane, (dot of the thigh's direction "
+                                    "with the pelvis's front + hip_back_cos) / sigma_hip where negative "
                                     "(take_model.hip_extension_residual: a hip extends 20-30 degrees; the image cannot tell a knee "
-                                    "raised in front of someone facing away from a thigh swung as far behind); None: off. "
-                                    "Measured at 0.05 (docs/solver-log.md round 31): bench/solver_sweep.py --repeats 3 all16 "
-                                    "84.9 -> 85.8 and 85.3 -> 85.2 mm, the four takes that do not turn 57.4 -> 56.2 and 55.9 -> 52.5 "
-                                    "(131_01 79.3 -> 73.6 and 77.2 -> 64.0; the pipeline's 131_01 render 85.9 -> 58.0), the "
-                                    "turning twelve +1.5 / +1.1, MediaPipe's 131_01 five-draw PA 69.5 -> 75.3; off until the "
-                                    "turning takes and MediaPipe's keypoints gain too")
+                                    "raised in front of someone facing away from a thigh swung as far behind, and the hang prior "
+                                    "picks the lower); None: off. bench/solver_sweep.py --repeats 3 (docs/solver-log.md round 31): "
+                                    "all16 84.9 -> 85.1 and 85.3 -> 84.6 mm, the four takes that do not turn 57.4 -> 56.0 and "
+                                    "55.9 -> 52.8 (131_01 79.3 -> 73.6 and 77.2 -> 64.0); on every frame instead +0.9 / -0.1, the "
+                                    "turning takes swinging by up to 26 mm")
     hip_back_cos: float = Field(0.6, ge=0, le=1.0, description="with sigma_hip: how far behind the frontal plane a thigh may swing "
-                                "at no cost (sine of the angle: 0.6, 37 degrees; the renders' CMU takes reach 0.27; at 0.4 all16 "
-                                "+3.0 / +0.0 mm)")
+                                "at no cost (sine of the angle: 0.6, 37 degrees; the renders' CMU takes reach 0.27; at 0.4, "
+                                "on every frame, all16 +3.0 / +0.0 mm)")
     sigma_twist: float = Field(0.2, gt=0, description="pelvis-thorax twist prior: difference of their unit forward vectors (0.2: about 11 degrees; walking twists 5-15)")
     sigma_acc_torso: float | None = Field(5.0, gt=0, description="torso joints' (hips, spine, shoulders, hip joints) acceleration prior, tighter than the limbs' (walking moves the hips at 2-3 m/s^2): it steadies the body's depth, which the image fixes only weakly; None: sigma_acc", json_schema_extra={"unit": "m/s^2"})
     ankle_height: float = Field(DEFAULT_ANKLE_HEIGHT, ge=0, le=0.3, description="ankle joint height above the floor when standing", json_schema_extra={"unit": "m"})

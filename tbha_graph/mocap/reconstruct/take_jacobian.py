@@ -167,10 +167,11 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
         out[:, row, J["right_ankle"]] -= bal["s"][:, None] * k
         row += 1
     # the thighs behind the pelvis's front: min(u . f + c, 0) / sigma, u = unit(knee - hip joint), f the pelvis's front
-    if w.sigma_hip is not None:
+    if w.sigma_hip is not None and d.away is not None:  # on the frames flagged away only
+        hip_on = np.asarray(d.away, dtype=bool)[rows]
         for k, (hj, kn) in enumerate(THIGHS):
             u, U = unit_jacobian(P[:, kn] - P[:, hj])
-            active = ((np.sum(u * pelvis, axis=-1) + w.hip_back_cos < 0.0) / w.sigma_hip)[:, None]
+            active = ((np.sum(u * pelvis, axis=-1) + w.hip_back_cos < 0.0) * hip_on / w.sigma_hip)[:, None]
             gk = (pelvis[:, None, :] @ U)[:, 0] * active
             out[:, row + k, kn] += gk
             out[:, row + k, hj] -= gk

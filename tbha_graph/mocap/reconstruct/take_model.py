@@ -224,8 +224,8 @@ class Weights:
     pelvis_depth: float = -0.03  # around this (metres; negative: behind it), :func:`pelvis_depth`
     sigma_balance: float | None = None  # the hips farther across the floor than balance_band from the ankles' segment (None: off)
     balance_band: float = 0.2    # metres, :func:`balance_residual`
-    sigma_hip: float | None = None  # a thigh swung behind the pelvis's frontal plane by more than hip_back_cos (unit vectors'
-    hip_back_cos: float = 0.6    # dot product with the pelvis's front) costs ((dot + hip_back_cos) / sigma_hip)² (None: off)
+    sigma_hip: float | None = None  # on frames flagged ``away``: a thigh swung behind the pelvis's frontal plane by more than
+    hip_back_cos: float = 0.6    # hip_back_cos (dot product with the pelvis's front) costs ((dot + hip_back_cos) / sigma_hip)² (None: off)
     contact_band: float = 0.03   # a planted ankle may rise this far above its standing height (heel and toe roll), metres
     sigma_offset: float = 0.03   # point offsets around their defaults, metres
     robust_scale: float = 2.0    # reprojection residuals beyond this many sigmas count as soft-L1 (outliers)
@@ -538,15 +538,18 @@ def balance_residual(P: np.ndarray, d: TakeData, w: "Weights") -> tuple[np.ndarr
 THIGHS = ((J["left_hip"], J["left_knee"]), (J["right_hip"], J["right_knee"]))
 
 
-def hip_extension_residual(P: np.ndarray, pelvis: np.ndarray, w: "Weights") -> np.ndarray:
-    """Each thigh swung behind the body ``(..., n, 2)``: ``min(unit(knee - hip joint) . pelvis + hip_back_cos, 0) /
-    sigma_hip``, ``pelvis`` the pelvis's front ``(..., n, 3)`` (:func:`fronts`), joints ``P`` ``(..., n, 16, 3)``.
+def hip_extension_residual(P: np.ndarray, pelvis: np.ndarray, w: "Weights", away: np.ndarray | None) -> np.ndarray:
+    """Each thigh swung behind the body ``(..., n, 2)`` on the frames ``away`` ``(n,)`` bool (only the head tracked,
+    :attr:`TakeData.away`; None: no frame): ``min(unit(knee - hip joint) . pelvis + hip_back_cos, 0) / sigma_hip``,
+    ``pelvis`` the pelvis's front ``(..., n, 3)`` (:func:`fronts`), joints ``P`` ``(..., n, 16, 3)``.
     A hip extends about 20-30 degrees behind the frontal plane; the renders' CMU takes keep the dot product above
     -0.27 on every frame (walks, a hop, a kick). The image does not: a knee raised in front of someone who faces
     away from the camera projects where a thigh swung as far behind them would, and the limbs' hang prior of such
-    frames prefers the lower, wrong one."""
+    frames prefers the lower, wrong one. Only there: on every frame the limit moved the sixteen renders' turning
+    takes by up to 26 mm either way (docs/solver-log.md round 31)."""
+    on = np.zeros(P.shape[-3], bool) if away is None else np.asarray(away, dtype=bool)
     u = unit(np.stack([P[..., k, :] - P[..., h, :] for h, k in THIGHS], axis=-2))
-    return np.minimum(np.sum(u * pelvis[..., None, :], axis=-1) + w.hip_back_cos, 0.0) / w.sigma_hip
+    return np.minimum(np.sum(u * pelvis[..., None, :], axis=-1) + w.hip_back_cos, 0.0) * (on / w.sigma_hip)[:, None]
 
 
 #: Limb bones (by child joint) the hang prior (:func:`hang_residual`) pulls towards straight down.
@@ -680,7 +683,7 @@ def frame_blocks(d: TakeData, w: "Weights") -> dict[str, slice]:
     has_sil = d.silhouette is not None
     sizes = [("reprojection", N_JOINTS * 2), ("torso", len(TORSO_PAIRS)), ("hinge", len(HINGES)), ("below_floor", 2),
              ("contact", 2), ("pose", 6), ("pelvis", 0 if w.sigma_pelvis is None else 1),
-             ("balance", 0 if w.sigma_balance is None else 1), ("hip_extension", 0 if w.sigma_hip is None else len(THIGHS)),
+             ("balance", 0 if w.sigma_balance is None else 1), ("hip_extension", 0 if w.sigma_hip is None or d.away is None else len(THIGHS)),
              ("silhouette", N_SIL if has_sil else 0), ("cover", N_COVER if has_sil else 0),
              ("upright", 1 if has_sil else 0), ("hang", N_HANG if has_sil else 0)]
     sizes += [(nm, k) for nm, k, on in (("keypoints", N_KP, d.keypoints is not None), ("facing", N_FACING, d.facing is not None),
@@ -716,8 +719,8 @@ class Layout:
 #: Residuals per frame that depend on that frame alone: reprojection (16 x 2), torso distances, hinges,
 #: ankle below the floor (2), planted ankle off the floor (2), pose prior (head along the neck, 3; pelvis
 #: facing where the thorax faces, 3); with ``sigma_pelvis`` the hips' fold (:func:`pelvis_depth`) 1 more, with
-#: ``sigma_balance`` the hips over the feet (:func:`balance_residual`) 1 more, with ``sigma_hip`` the thighs'
-#: extension limit (:func:`hip_extension_residual`) 2 more; with a silhouette, :data:`N_SIL` + :data:`N_COVER` + 1 + :data:`N_HANG` more,
+#: ``sigma_balance`` the hips over the feet (:func:`balance_residual`) 1 more, with ``sigma_hip`` and frames that can be flagged
+#: away the thighs' extension limit (:func:`hip_extension_residual`) 2 more; with a silhouette, :data:`N_SIL` + :data:`N_COVER` + 1 + :data:`N_HANG` more,
 #: with a facing hint :data:`N_FACING` more, on a take with an opening T-pose :data:`N_TPOSE` more
 #: (:attr:`TakeProblem.n_frame_res`).
 N_FRAME_RES = N_JOINTS * 2 + len(TORSO_PAIRS) + len(HINGES) + 4 + 6
@@ -832,8 +835,8 @@ class TakeProblem:
             terms.append(((pelvis_depth(P) - w.pelvis_depth) / w.sigma_pelvis)[..., None])
         if w.sigma_balance is not None:
             terms.append(balance_residual(P, d, w)[0][..., None])
-        if w.sigma_hip is not None:
-            terms.append(hip_extension_residual(P, pelvis, w))
+        if w.sigma_hip is not None and d.away is not None:  # rows only where frames can be flagged away (a silhouette)
+            terms.append(hip_extension_residual(P, pelvis, w, d.away))
         if d.silhouette is not None:  # the silhouette's points, and the support: with them the feet's image rows fix the depth
             away = np.zeros(P.shape[0], bool) if d.away is None else np.asarray(d.away, dtype=bool)
             to_cam = [-unit(P[..., J["chest"], :]), -unit(P[..., J["hips"], :])]
