@@ -17,9 +17,8 @@ import tempfile
 import time
 from pathlib import Path
 
-import cv2
-
 from tbha_graph.mocap.io import video_writer
+from tbha_graph.mocap.io.video import iter_frames, probe_video
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -38,14 +37,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeat", type=int, default=5)
     a = ap.parse_args()
-    cap = cv2.VideoCapture(str(ROOT / "data" / "sample" / "sample.mp4"))
-    frames = []
-    while True:
-        ok, f = cap.read()
-        if not ok:
-            break
-        frames.append(f)
-    cap.release()
+    frames = [f for _, f in iter_frames(probe_video(ROOT / "data" / "sample" / "sample.mp4"))]
     default = video_writer.H264_THREADS
     res: dict[str, list[float]] = {default: [], "SLICE": []}
     with tempfile.TemporaryDirectory(prefix="tbha-enc-") as tmp:
