@@ -330,6 +330,29 @@ def test_body_scale_follows_the_head_while_the_torso_is_hidden():
     assert body.scale == pytest.approx(0.7 * 1.03, abs=0.01)
 
 
+def test_a_placed_joint_stays_within_its_bone_as_the_start_showed_it():
+    """Only the head seen (the back turned): the untracked neck, dragged off by the torso placed below it, is
+    pulled back to at most the head-to-neck distance the start T-pose showed x scale x 1.15 — reach's margin for
+    blobs (0.12 m) does not apply to a point the tracker places (with it the neck stayed 45 px from the head where
+    the start showed 26, beyond the bone on a take walking away: bench/labelling.py ``off_body_placed_pct``)."""
+    from tbha_graph.mocap.track.body import REACH_SLACK, BodyBounds
+
+    p0 = tpose_points()
+    body = BodyBounds(p0, [[j] for j in range(N_JOINTS)])
+    body.scale = 0.7
+    only_head = np.zeros(N_JOINTS, bool)
+    only_head[J["head"]] = True
+    pts = p0.astype(np.float64).copy()
+    pts[:, 1] += 120.0  # the body placed 120 px below the seen head
+    pts[J["head"]] = p0[J["head"]]
+    body.settle(pts, only_head)
+    seen_len = np.linalg.norm(p0[J["head"]] - p0[J["neck"]])
+    assert np.linalg.norm(pts[J["head"]] - pts[J["neck"]]) <= 0.7 * REACH_SLACK * seen_len + 1e-9
+    assert np.allclose(pts[J["head"]], p0[J["head"]])  # a tracked point never moves
+    for j in range(1, N_JOINTS):  # and every placed bone within its own bound
+        assert np.linalg.norm(pts[j] - pts[PARENTS[j]]) <= body.placed_reach(j) + 1e-6, j
+
+
 def test_left_right_twins_reacquired_by_a_guess_stay_flagged(seed_model):
     """Seed suit: everything vanishes for 12 frames; when the body comes back the hip joints stay hidden,
     so each knee could be either (both within reach of the hips): whatever the tracker picks, every frame

@@ -148,10 +148,20 @@ class BodyBounds:
             return got, True
         return got, close
 
+    def placed_reach(self, j: int, within: float = 0.8) -> float:
+        """Farthest (px) a joint the tracker places (not measured) may be from its parent's point, or the parent
+        from it: ``within`` x :meth:`reach`, and at most the bone as the start T-pose showed it (patch to patch, so
+        its patches' offsets included) x ``scale`` x ``REACH_SLACK``. Reach's margin is for blobs that may be
+        anywhere on the suit; a placed point has no such excuse, and on short bones the margin doubles the reach
+        (the head to the neck: 26 px seen at the start, 45 px allowed), which put a placed neck beyond what the
+        bone allows once the actor had walked away from the camera (``bench/labelling.py`` ``off_body_placed_pct``)."""
+        return min(within * self.reach(j), self.scale * REACH_SLACK * float(self.L0[j]))
+
     def settle(self, points: np.ndarray, tracked: np.ndarray, sweeps: int = 8, within: float = 0.8) -> np.ndarray:
-        """Bring untracked joints within ``within`` x reach of their neighbours, in place: each bone longer
+        """Bring untracked joints within :meth:`placed_reach` of their neighbours, in place: each bone longer
         than that is shortened by moving its untracked end(s) (both halfway when both are untracked);
-        tracked points never move. Returns ``points``."""
+        tracked points never move; what the sweeps leave (a chain pulled from both ends, or far from its one tracked
+        end) is settled outwards from the tracked joints. Returns ``points``."""
         for _ in range(sweeps):
             moved = False
             for j in range(1, N_JOINTS):
@@ -160,7 +170,7 @@ class BodyBounds:
                     continue
                 v = points[j] - points[par]
                 n = float(np.linalg.norm(v))
-                r = within * self.reach(j)
+                r = self.placed_reach(j, within)
                 if n <= r or n == 0.0:
                     continue
                 excess = v * (1.0 - r / n)
@@ -174,13 +184,26 @@ class BodyBounds:
                 moved = True
             if not moved:
                 break
-        for j in range(1, N_JOINTS):  # whatever is left (a chain pulled from both ends): the parent's side wins
-            par = int(PARENTS[j])
-            if not tracked[j]:
-                v = points[j] - points[par]
-                n = float(np.linalg.norm(v))
-                if n > within * self.reach(j):
-                    points[j] = points[par] + v * (within * self.reach(j) / n)
+        # whatever is left: outwards along the bones from the tracked joints (from the root when none is), each
+        # untracked joint brought within reach of the neighbour it is reached from
+        done = np.asarray(tracked, dtype=bool).copy()
+        if not done.any():
+            done[0] = True
+        frontier = [int(k) for k in np.flatnonzero(done)]
+        while frontier:
+            nxt = []
+            for a in frontier:
+                for b in ([int(PARENTS[a])] if PARENTS[a] >= 0 else []) + [int(c) for c in np.flatnonzero(PARENTS == a)]:
+                    if done[b]:
+                        continue
+                    v = points[b] - points[a]
+                    n = float(np.linalg.norm(v))
+                    r = self.placed_reach(b if PARENTS[b] == a else a, within)  # the bone between a and b
+                    if n > r:
+                        points[b] = points[a] + v * (r / n)
+                    done[b] = True
+                    nxt.append(b)
+            frontier = nxt
         return points
 
     def observe(self, points: np.ndarray, tracked: np.ndarray, head_area: float | None = None) -> None:
