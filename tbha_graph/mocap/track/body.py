@@ -10,7 +10,9 @@ the actor facing the camera) and kept up to date with the tracked points:
 * ``reach(j)``: the farthest a joint's patch can be from its parent's patch in the image: the bone's
   start length x ``scale`` x 1.15, plus 0.12 m (both patches sit on the suit, in front of their joints;
   metres -> pixels from the start torso, neck to hips = 0.315 m). No point the tracker outputs is
-  farther from its parent's point than that: a joint is never placed where its bones cannot reach.
+  farther from its parent's point than that: a joint is never placed where its bones cannot reach. A point
+  it places (not measured) is held closer, within the bone as the start showed it x ``scale`` x 1.15
+  (:meth:`BodyBounds.placed_reach`: the margin is for blobs anywhere on a patch, not for a guess).
 * the last seen offset of each joint from its parent, and the ``facing`` it was seen with (+1 front to
   the camera, -1 back): a lost joint is placed at its parent plus that offset (mirrored left-right when
   the actor has turned round since, shortened to the reach), never extrapolated.
