@@ -72,6 +72,14 @@ def front_jacobian(P: np.ndarray, joints: tuple[int, int, int, int]) -> tuple[np
     return f, [da, -da, db, -db]
 
 
+def add_through_front(out: np.ndarray, row: int, v: np.ndarray, d_front: list[np.ndarray], front_joints, scale: np.ndarray) -> None:
+    """Add, in place, the derivative of ``v . front`` through the front (``v`` ``(n, 3)`` held fixed) to residual ``row``
+    of ``out`` ``(n, rows, 16, 3)``: ``scale`` ``(n, 1)`` x ``v`` times each of the front's derivatives ``d_front``
+    (:func:`front_jacobian`) on its joint of ``front_joints``. The hinge, hip-extension and facing-away terms share it."""
+    for jj, Dj in zip(front_joints, d_front):
+        out[:, row, jj] += (v[:, None, :] @ Dj)[:, 0] * scale
+
+
 def joint_jacobian(prob: TakeProblem, fr: np.ndarray, L: np.ndarray) -> np.ndarray:
     """``dP/dx`` ``(n, 16, 3, PER_FRAME)`` of :meth:`.take_model.TakeProblem.joints_from_frames` at frame
     unknowns ``fr`` ``(n, PER_FRAME)`` with bone lengths ``L`` ``(16,)``."""
@@ -119,8 +127,7 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
         out[:, row + k, a] += gi
         out[:, row + k, b] += gb
         out[:, row + k, jt] -= gi + gb
-        for jj, Dj in zip(fj, dfwd):
-            out[:, row + k, jj] += (inside[:, None, :] @ Dj)[:, 0] * active
+        add_through_front(out, row + k, inside, dfwd, fj, active)
     row += len(HINGES)
     # ankles below the floor / planted ankles above their band
     nf, dfl = prob.floor(g)
@@ -175,8 +182,7 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
             gk = (pelvis[:, None, :] @ U)[:, 0] * active
             out[:, row + k, kn] += gk
             out[:, row + k, hj] -= gk
-            for jj, Dj in zip(PELVIS_JOINTS, d_pelvis):
-                out[:, row + k, jj] += (u[:, None, :] @ Dj)[:, 0] * active
+            add_through_front(out, row + k, u, d_pelvis, PELVIS_JOINTS, active)
         row += len(THIGHS)
     if d.silhouette is not None:
         sil = _silhouette(prob, P, g, rows)
@@ -196,8 +202,7 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
             c, C = unit_jacobian(P[:, at])
             c, C = -c, -C
             on = (away & (np.sum(fr * c, axis=-1) + w.away_cos > 0.0))[:, None] / w.sigma_away
-            for jj, Dj in zip(fj, dfr):
-                out[:, row + k, jj] += (c[:, None, :] @ Dj)[:, 0] * on
+            add_through_front(out, row + k, c, dfr, fj, on)
             out[:, row + k, at] += (fr[:, None, :] @ C)[:, 0] * on
         row += 2  # the silhouette's bottom reached: d/dP_a of -rho(b - v(S(P_a)))
         bot = _bottom(prob, P, g, rows)
