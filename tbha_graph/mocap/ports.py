@@ -112,7 +112,7 @@ _PER_FRAME = Array("float", ("n_frames",))
 ERRORS = Bundle(
     "errors",
     {"mpjpe_mm": _PER_FRAME, "error_2d_px": _PER_FRAME, "reprojection_px": _PER_FRAME, "fps": Array("float", ())},
-    doc="per-frame errors (NaN where unavailable): mpjpe_mm, mpjpe_root_mm, pa_mpjpe_mm, error_2d_px, reprojection_px; fps",
+    doc="per-frame errors (NaN where unavailable): mpjpe_mm, mpjpe_root_mm, pa_mpjpe_mm, error_2d_px (tracked points), placed_2d_px (untracked), reprojection_px; fps",
 )
 SMPL_PARAMS = Bundle(
     "smpl",

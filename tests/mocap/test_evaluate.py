@@ -20,7 +20,8 @@ from tbha_graph.mocap.io.skeleton_map import motion16_from_bvh
 CLIP = Path(__file__).resolve().parents[2] / "data" / "mocap" / "cmu" / "131_02.bvh"
 N = 120  # frames: 2 s of 131_02 at 60 fps
 FPS = 60.0
-GT_KEYS = {"mpjpe_mm", "mpjpe_root_mm", "pa_mpjpe_mm", "error_2d_px_median", "error_2d_px_p95", "accel_error_m_s2",
+GT_KEYS = {"mpjpe_mm", "mpjpe_root_mm", "pa_mpjpe_mm", "error_2d_px_median", "error_2d_px_p95", "placed_2d_px_median",
+           "placed_2d_px_p95", "accel_error_m_s2",
            "per_joint_mpjpe_mm", "truth_jitter_m_s3"}
 
 
@@ -195,6 +196,21 @@ def test_hidden_patches_are_left_out_of_the_2d_error(scene):
     res, _ = evaluate(scene, scene["joints"], tracks=tracks)
     assert res["error_2d_px_p95"] == pytest.approx(0.0, abs=1e-4)
     assert res["reprojection_px_p95"] > 400  # the reprojection check does not know about the truth
+
+
+def test_points_placed_without_being_tracked_are_scored_apart_from_the_tracked(scene):
+    tracks = dict(scene["tracks"])
+    pts = scene["tracks"]["points"].copy()
+    tracked = np.ones((N, sk.N_JOINTS), dtype=bool)
+    knee = sk.JOINT_INDEX["right_knee"]
+    tracked[:20, knee] = False
+    pts[:20, knee] += 40.0  # the tracker's guess for a patch it did not see (its patch is visible in the truth)
+    tracks["points"], tracks["tracked"] = pts, tracked
+    res, err = evaluate(scene, scene["joints"], tracks=tracks)
+    assert res["error_2d_px_p95"] == pytest.approx(0.0, abs=1e-4)  # the guesses are not tracking errors
+    assert res["placed_2d_px_median"] == pytest.approx(40.0 * np.sqrt(2.0), rel=1e-6)
+    assert np.nanmax(err["error_2d_px"]) == pytest.approx(0.0, abs=1e-4)
+    assert np.isfinite(err["placed_2d_px"][:20]).all() and np.isnan(err["placed_2d_px"][20:]).all()
 
 
 def test_truth_at_another_resolution_is_rescaled(scene):

@@ -27,8 +27,10 @@ With ground truth (``truth`` connected and not ``{}``):
 * ``joint_angle_err_deg``: mean |angle - truth's angle| over frames and the joints whose parent is not the
   root, the angle at a joint being that between its parent bone and its own (elbow and knee flexion, the
   limbs' angle to the girdles, the neck's and head's bend); no alignment.
-* ``error_2d_px_median`` / ``_p95``: the tracks' 2D points (tracked or predicted) vs the truth's
-  ``joints2d`` (rescaled to the tracks' image size), for joints the truth marks visible.
+* ``error_2d_px_median`` / ``_p95``: the tracked 2D points vs the truth's ``joints2d`` (rescaled to the
+  tracks' image size), for joints the truth marks visible; ``placed_2d_px_median`` / ``_p95``: the same for
+  the points the tracker placed without seeing them (untracked; the solver gives them no weight), so a
+  guess for a patch seen only as a sliver does not read as a tracking error.
 * ``accel_error_m_s2``: mean |acceleration - truth's acceleration| (second difference x fps^2), world
   frame after the clip alignment; ``truth_jitter_m_s3``: the real motion's own jitter, for reference.
 * ``raw_mpjpe_mm``, ``raw_accel_error_m_s2`` for ``raw_motion`` (same alignment, fitted separately).
@@ -45,7 +47,8 @@ above the floor y = 0), ``foot_skate_mm`` (mean horizontal movement per frame of
 A figure that cannot be computed (e.g. jitter of a clip shorter than 4 frames) is ``null``.
 
 Output ``errors`` (per frame, NaN where unavailable): ``mpjpe_mm``, ``mpjpe_root_mm``, ``pa_mpjpe_mm``,
-``error_2d_px``, ``reprojection_px`` (each ``(n_frames,)``, mean over the frame's joints), ``fps`` ().
+``error_2d_px`` (tracked points), ``placed_2d_px`` (untracked points), ``reprojection_px`` (each ``(n_frames,)``,
+mean over the frame's joints), ``fps`` ().
 """
 from __future__ import annotations
 
@@ -223,7 +226,8 @@ def compute_metrics(
         metrics["inferred_pct"] = _figure(100.0 * inferred.mean())
         metrics["missing_pct"] = _figure(100.0 * (~(tracked3d | inferred)).mean())
     nan = np.full(n, np.nan)
-    errors = {"mpjpe_mm": nan, "mpjpe_root_mm": nan, "pa_mpjpe_mm": nan, "error_2d_px": nan, "reprojection_px": reproj,
+    errors = {"mpjpe_mm": nan, "mpjpe_root_mm": nan, "pa_mpjpe_mm": nan, "error_2d_px": nan, "placed_2d_px": nan,
+              "reprojection_px": reproj,
               "fps": np.asarray(fps, dtype=np.float64)}
     doubt = doubtful_bits(n, tracks, motion, reproj, unseen)  # issue 13: frames whose labelling/result is doubtful
     metrics["doubtful_ranges"] = doubtful_ranges(doubt)
@@ -245,10 +249,13 @@ def compute_metrics(
         gt2d = truth_joints2d(truth, int(tracks["width"]) if "width" in tracks else None,
                               int(tracks["height"]) if "height" in tracks else None)
         if gt2d is not None:
-            e2d = m.masked_distances(points, gt2d, truth_visibility(truth))
-            metrics["error_2d_px_median"] = _figure(m.nan_percentile(e2d, 50))
-            metrics["error_2d_px_p95"] = _figure(m.nan_percentile(e2d, 95))
-            errors["error_2d_px"] = m.frame_mean(e2d)
+            seen = truth_visibility(truth)
+            tracked = np.asarray(tracks["tracked"], dtype=bool)
+            for name, which in (("error_2d_px", tracked), ("placed_2d_px", ~tracked)):
+                e2d = m.masked_distances(points, gt2d, seen & which)
+                metrics[f"{name}_median"] = _figure(m.nan_percentile(e2d, 50))
+                metrics[f"{name}_p95"] = _figure(m.nan_percentile(e2d, 95))
+                errors[name] = m.frame_mean(e2d)
         metrics.update(patch_figures(joints, points, truth, alignment))
         if raw is not None:
             raw_figures, _ = truth_figures(raw, fps, truth, alignment)
@@ -264,7 +271,7 @@ def compute_metrics(
 
 @node(
     "evaluate.metrics",
-    version=7,
+    version=8,
     inputs={
         "motion": MOTION,
         "tracks": TRACKS2D,

@@ -2,8 +2,9 @@
 
 Input: the ``errors`` bundle of ``evaluate.metrics`` (per-frame arrays, NaN where unavailable).
 With ground truth: top panel, 3D joint error in mm (``mpjpe_mm`` after the clip alignment, and
-``pa_mpjpe_mm`` dashed); bottom panel, 2D error in px (``error_2d_px``, tracks vs truth) and the
-reprojection error in px (``reprojection_px``, 3D motion projected vs tracks). Without ground truth
+``pa_mpjpe_mm`` dashed); bottom panel, 2D error in px (``error_2d_px``, tracked points vs truth; dotted,
+``placed_2d_px``, the points the tracker placed without seeing them) and the reprojection error in px
+(``reprojection_px``, 3D motion projected vs tracks). Without ground truth
 (``mpjpe_mm`` all NaN): one panel, the reprojection error. The x axis is time in seconds (frame / fps);
 each legend entry gives the curve's mean over frames — for the 3D curves exactly ``metrics.json``'s
 ``mpjpe_mm`` / ``pa_mpjpe_mm`` (every frame has all 16 joints); the 2D curves' means are named as such
@@ -65,6 +66,9 @@ def plot_errors(errors: dict, path, title: str = "", dpi: int = 120):
         ax3.set_title("3D: mean error of the 16 joints vs ground truth", fontsize=10, loc="left")
     ax2 = axes[-1]
     drew = _curve(ax2, t, series["error_2d_px"], "2D tracks vs ground truth", "px", style.TRACKS_PLOT_BGR)
+    if "placed_2d_px" in errors:  # untracked points: the tracker's guesses, which the solver does not fit
+        drew |= _curve(ax2, t, np.asarray(errors["placed_2d_px"], dtype=np.float64).reshape(-1),
+                       "placed, not tracked (unused by the solve)", "px", style.TRACKS_PLOT_BGR, ls=":")
     drew |= _curve(ax2, t, series["reprojection_px"], "reprojection (3D motion vs tracks)", "px", style.REPROJECTED_BGR)
     if not drew:
         ax2.text(0.5, 0.5, "no 2D error available (no tracked joints)", transform=ax2.transAxes, ha="center", va="center")
@@ -88,7 +92,7 @@ def plot_errors(errors: dict, path, title: str = "", dpi: int = 120):
     return save_png(fig, path, dpi)
 
 
-@node("viz.error_plot", version=1, inputs={"errors": ERRORS}, outputs={"png": IMAGE},
+@node("viz.error_plot", version=2, inputs={"errors": ERRORS}, outputs={"png": IMAGE},
       params=ErrorPlotParams)
 def error_plot(ctx, errors):
     """Plot the per-frame errors of evaluate.metrics: 3D error (mm) and 2D error (px) over time, or the
