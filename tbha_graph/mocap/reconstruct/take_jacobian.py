@@ -20,7 +20,7 @@ import numpy as np
 from ..skeleton import N_JOINTS, PARENTS
 from .take_model import (ANKLES, AXIS_TRIPLES, HANG_BONES, HINGES, J, N_BONES, N_COVER, N_KP, PELVIS_JOINTS,
                          PELVIS_SIDE, PER_FRAME, SIL_PAIRS, THIGHS, THORAX_JOINTS, TORSO_PAIRS, TPOSE_PAIRS, TakeProblem, balance_residual,
-                         bottom_residual,
+                         bottom_residual, cross3,
                          cover_residuals, cover_segments, hang_residual, keypoint_targets, robust_slope, sil_residuals,
                          torso_unseen, unit,
                          unseen_points, upright_residual)
@@ -66,7 +66,7 @@ def front_jacobian(P: np.ndarray, joints: tuple[int, int, int, int]) -> tuple[np
     (four ``(n, 3, 3)``)."""
     l, r, up, lo = (P[:, k] for k in joints)
     a, b = l - r, up - lo
-    f, Fc = unit_jacobian(np.cross(a, b))
+    f, Fc = unit_jacobian(cross3(a, b))
     da = Fc @ -skew(b)  # d(a x b) = -[b]x da + [a]x db
     db = Fc @ skew(a)
     return f, [da, -da, db, -db]
@@ -156,9 +156,9 @@ def residual_jacobian(prob: TakeProblem, P: np.ndarray, g: np.ndarray, parts: di
         l, r, c, hp = (P[:, J[k]] for k in ("left_hip", "right_hip", "chest", "hips"))
         m = 0.5 * (l + r)
         a, b = l - r, c - m
-        nn, N = unit_jacobian(np.cross(a, b))
+        nn, N = unit_jacobian(cross3(a, b))
         gv = (N @ (hp - m)[..., None])[..., 0]
-        gb, ga = np.cross(gv, b), np.cross(gv, a)
+        gb, ga = cross3(gv, b), cross3(gv, a)
         out[:, row, J["hips"]] += nn / w.sigma_pelvis
         out[:, row, J["left_hip"]] += (-0.5 * nn - gb - 0.5 * ga) / w.sigma_pelvis
         out[:, row, J["right_hip"]] += (-0.5 * nn + gb - 0.5 * ga) / w.sigma_pelvis
