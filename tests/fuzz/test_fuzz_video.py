@@ -9,9 +9,9 @@ project's PyAV writer when ``av`` is installed. Properties:
   ``iter_frames`` yields every frame, each equal to that frame of the intact file, or it stops with a
   ``NodeError`` naming the file and the frame where decoding failed (= the number of frames it
   yielded), every frame it yielded but the last equal to the intact file's (the last one, cut short,
-  may be decoded with concealed errors; the error right after it stops the run). Known exception,
-  kept as a strict xfail below: an MJPG AVI cut inside its last frame decodes that frame with
-  concealed errors and no error at all (OpenCV's decoder reports nothing);
+  may be decoded with concealed errors; the error right after it stops the run). An MJPG AVI cut
+  inside a frame (OpenCV decodes it with concealed errors and reports nothing) stops at that frame:
+  ``io.video`` reads the AVI's chunk sizes (``test_mjpg_cut_inside_its_last_frame_is_detected``);
 * bytes overwritten at a random place: the same, except that decoded frames may differ (a decoder
   cannot tell damaged image data from an image, nor a damaged header declaring another frame size
   from a real one), but every frame has the size ``probe_video`` reported;
@@ -135,15 +135,12 @@ def test_fuzz_truncated_video(videos, kind, data) -> None:
     CASES[f"video truncated ({kind})"] += 1
     raw = videos[kind]["bytes"]
     cut = data.draw(st.integers(0, len(raw) - 1), label="truncated at byte")
-    if kind == "mjpg.avi":  # the known undetected case: see test_mjpg_cut_inside_its_last_frame_is_detected
-        a, b = _last_jpeg(raw)
-        cut = cut if not a < cut < b else a
     check_video(raw[:cut], kind, videos[kind], exact=True)
 
 
-@pytest.mark.xfail(strict=True, reason="io.video: OpenCV decodes a JPEG cut short with concealed errors and reports "
-                   "nothing, so an MJPG AVI cut inside its last frame yields a damaged last frame and no error")
 def test_mjpg_cut_inside_its_last_frame_is_detected(videos) -> None:
+    """OpenCV decodes a JPEG cut short with concealed errors and reports nothing; io.video finds the cut from the
+    AVI's chunk sizes (``io.avi_cut``) and stops there, naming the frame."""
     raw = videos["mjpg.avi"]["bytes"]
     a, b = _last_jpeg(raw)
     check_video(raw[: (a + b) // 2], "mjpg.avi", videos["mjpg.avi"], exact=True)

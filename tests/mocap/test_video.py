@@ -10,6 +10,7 @@ from tbha_graph.core.errors import NodeError
 from tbha_graph.core.testing import run_node
 from tbha_graph.core.types import hash_file
 from tbha_graph.mocap.io import video as video_module
+from tbha_graph.mocap.io.avi_cut import avi_cut_frame
 from tbha_graph.mocap.io.video import iter_frames, iter_frames_at, video
 from tbha_graph.mocap.segment.testframes import write_video
 
@@ -126,9 +127,15 @@ def test_decoding_failure_names_the_frame(tmp_path):
     clip = run_node(video, {"path": str(cut)})["video"]
     assert clip.n_frames == 20
     seen = []
-    with pytest.raises(NodeError, match=r"cut.avi: decoding failed at frame (\d+)") as e:
+    # OpenCV would decode the frame the cut runs through, damaged, without a word: the AVI's chunk sizes tell
+    with pytest.raises(NodeError, match=r"cut.avi: the file ends inside frame (\d+)'s data") as e:
         for i, _ in iter_frames(clip):
             seen.append(i)
-    assert f"frame {len(seen)}" in str(e.value) and 0 < len(seen) < 20
-    with pytest.raises(NodeError, match=r"cut.avi: decoding failed at frame \d+ \(on the way to frame 19\)"):
+    assert f"frame {len(seen)}'s data" in str(e.value) and 0 < len(seen) < 20
+    assert avi_cut_frame(cut) == len(seen) and avi_cut_frame(full) is None
+    assert f"set io.video 'stop' to {len(seen)}" in str(e.value)
+    with pytest.raises(NodeError, match=r"cut.avi: the file ends inside frame \d+'s data \(on the way to frame 19\)"):
         list(iter_frames_at(clip, [0, 19]))  # decoded through: the first frame that fails is named
+    # the frames before the cut are whole: a clip that stops there reads without an error
+    short = run_node(video, {"path": str(cut), "stop": len(seen)})["video"]
+    assert [i for i, _ in iter_frames(short)] == seen

@@ -21,6 +21,7 @@ from ...core.errors import NodeError
 from ...core.filehash import file_content_hash
 from ...core.node import InputPath, node, optional
 from ..ports import VIDEO, VIDEO_FILE, VideoClip
+from .avi_cut import avi_cut_frame
 
 _OPEN_HINT = "check that the file is a video OpenCV can decode (e.g. .mp4 with mp4v/H.264, .avi with MJPG)"
 
@@ -95,6 +96,9 @@ def probe_video(path: str | Path, start: int = 0, stop: int | None = None, scale
                 f"video {path}: start frame {start} is beyond the end (the video has {count} frames, 0..{count - 1})",
                 hint=f"use a start below {count}",
             )
+        cut = avi_cut_frame(path)
+        if cut is not None and start >= cut:
+            _checked(None, path, start, True, frame, "the start frame", cut)  # raises
         if start > 0:
             cap.set(cv2.CAP_PROP_POS_FRAMES, start)
             ok, frame = cap.read()
@@ -129,12 +133,13 @@ def iter_frames(clip: VideoClip, start: int | None = None, stop: int | None = No
     if first >= last:
         return
     path, cap = _open_clip(clip)
+    cut = avi_cut_frame(path)
     try:
         if first > 0:
             cap.set(cv2.CAP_PROP_POS_FRAMES, first)
         for index in range(first, last):
             ok, frame = cap.read()
-            yield index, _checked(clip, path, index, ok, frame, f"frames {first}..{last - 1} were requested")
+            yield index, _checked(clip, path, index, ok, frame, f"frames {first}..{last - 1} were requested", cut)
     finally:
         cap.release()
 
@@ -147,14 +152,25 @@ def _open_clip(clip: VideoClip) -> tuple[Path, cv2.VideoCapture]:
     return path, _open(path)
 
 
-def _checked(clip: VideoClip, path: Path, index: int, ok: bool, frame, requested: str) -> np.ndarray:
+def _checked(clip: VideoClip | None, path: Path, index: int, ok: bool, frame, requested: str,
+             cut: int | None = None) -> np.ndarray:
     """Frame ``index`` as :func:`iter_frames` yields it (downscaled when ``clip.scale < 1``), or a NodeError naming
-    the file and the frame when it did not decode or has another size than ``clip``'s."""
+    the file and the frame when it did not decode, lies at or after ``cut`` (an AVI's first frame whose data the file
+    does not hold entirely, :func:`.avi_cut.avi_cut_frame`: OpenCV decodes such a frame damaged and says nothing) or
+    has another size than ``clip``'s (``clip`` None: only the first two checks)."""
+    if cut is not None and index >= cut:
+        raise NodeError(
+            f"video {path}: the file ends inside frame {cut}'s data ({requested}): a truncated copy",
+            hint=f"copy the file again, or set io.video 'stop' to {cut} to use the frames before it" if cut > 0
+            else "copy the file again: not one frame of it is whole",
+        )
     if not ok or frame is None:
         raise NodeError(
             f"video {path}: decoding failed at frame {index} ({requested})",
             hint="the file may be truncated or corrupt; re-encode it or set io.video 'stop' to end before this frame",
         )
+    if clip is None:
+        return frame
     if clip.scale < 1.0:
         return cv2.resize(frame, (clip.width, clip.height), interpolation=cv2.INTER_AREA)
     if frame.shape[1] != clip.width or frame.shape[0] != clip.height:
@@ -183,6 +199,7 @@ def iter_frames_at(clip: VideoClip, indices) -> Iterator[tuple[int, np.ndarray]]
     if any(b <= a for a, b in zip(picks, picks[1:])) or picks[0] < clip.start or picks[-1] >= clip.stop:
         raise ValueError(f"frame indices must be sorted, unique and within {clip.start}..{clip.stop - 1}: {picks[:5]}...")
     path, cap = _open_clip(clip)
+    cut = avi_cut_frame(path)
     try:
         at = 0  # the next frame the capture decodes
         for index in picks:
@@ -191,11 +208,11 @@ def iter_frames_at(clip: VideoClip, indices) -> Iterator[tuple[int, np.ndarray]]
                 at = index
             while at < index:
                 if not cap.grab():
-                    _checked(clip, path, at, False, None, f"on the way to frame {index}")  # raises
+                    _checked(clip, path, at, False, None, f"on the way to frame {index}", cut)  # raises
                 at += 1
             ok, frame = cap.read()
             at += 1
-            yield index, _checked(clip, path, index, ok, frame, f"frame {index} was requested")
+            yield index, _checked(clip, path, index, ok, frame, f"frame {index} was requested", cut)
     finally:
         cap.release()
 
