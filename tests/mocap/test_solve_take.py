@@ -782,7 +782,6 @@ def test_hip_extension_residual_is_a_thigh_swung_behind_the_body(truth):
     np.testing.assert_allclose(hip_extension_residual(turned, fronts(turned)[1], w, away), r)
     seen = np.arange(len(P)) % 3 == 0  # frames with patches tracked: never charged
     np.testing.assert_array_equal(hip_extension_residual(swung, fronts(swung)[1], w, ~seen), np.where(seen[:, None], 0.0, r))
-    assert not hip_extension_residual(swung, fronts(swung)[1], w, None).any()
 
 
 def test_dip_pieces_cut_a_run_where_the_bone_comes_back_towards_the_image_plane(truth):

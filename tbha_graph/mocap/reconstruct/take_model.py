@@ -546,16 +546,16 @@ def balance_residual(P: np.ndarray, d: TakeData, w: "Weights") -> tuple[np.ndarr
 THIGHS = ((J["left_hip"], J["left_knee"]), (J["right_hip"], J["right_knee"]))
 
 
-def hip_extension_residual(P: np.ndarray, pelvis: np.ndarray, w: "Weights", away: np.ndarray | None) -> np.ndarray:
+def hip_extension_residual(P: np.ndarray, pelvis: np.ndarray, w: "Weights", away: np.ndarray) -> np.ndarray:
     """Each thigh swung behind the body ``(..., n, 2)`` on the frames ``away`` ``(n,)`` bool (only the head tracked,
-    :attr:`TakeData.away`; None: no frame): ``min(unit(knee - hip joint) . pelvis + hip_back_cos, 0) / sigma_hip``,
+    :attr:`TakeData.away`): ``min(unit(knee - hip joint) . pelvis + hip_back_cos, 0) / sigma_hip``,
     ``pelvis`` the pelvis's front ``(..., n, 3)`` (:func:`fronts`), joints ``P`` ``(..., n, 16, 3)``.
     A hip extends about 20-30 degrees behind the frontal plane; the renders' CMU takes keep the dot product above
     -0.27 on every frame (walks, a hop, a kick). The image does not: a knee raised in front of someone who faces
     away from the camera projects where a thigh swung as far behind them would, and the limbs' hang prior of such
     frames prefers the lower, wrong one. Only there: on every frame the limit moved the sixteen renders' turning
     takes by up to 26 mm either way (docs/solver-log.md round 31)."""
-    on = np.zeros(P.shape[-3], bool) if away is None else np.asarray(away, dtype=bool)
+    on = np.asarray(away, dtype=bool)
     u = unit(np.stack([P[..., k, :] - P[..., h, :] for h, k in THIGHS], axis=-2))
     return np.minimum(np.sum(u * pelvis[..., None, :], axis=-1) + w.hip_back_cos, 0.0) * (on / w.sigma_hip)[:, None]
 
