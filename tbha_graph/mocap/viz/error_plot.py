@@ -8,7 +8,7 @@ With ground truth: top panel, 3D joint error in mm (``mpjpe_mm`` after the clip 
 (``mpjpe_mm`` all NaN): one panel, the reprojection error. The x axis is time in seconds (frame / fps);
 each legend entry gives the curve's mean over frames — for the 3D curves exactly ``metrics.json``'s
 ``mpjpe_mm`` / ``pa_mpjpe_mm`` (every frame has all 16 joints); the 2D curves' means are named as such
-(``metrics.json`` gives medians and 95th percentiles over all points for those). Gaps (NaN) are left as breaks in the curves. Frames whose
+(``metrics.json`` gives medians and 95th percentiles over the points for those). Gaps (NaN) are left as breaks in the curves. Frames whose
 labelling is doubtful (``doubtful`` in the bundle, see :mod:`tbha_graph.mocap.evaluate.doubtful`) are
 shaded orange in every panel.
 """
