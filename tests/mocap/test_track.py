@@ -133,6 +133,20 @@ def test_no_t_pose_is_an_error(model):
         run_node(posture_kalman, detections=det, colors=model)
 
 
+@pytest.mark.parametrize("shown, points_to_mediapipe", [(0, True), (4, True), (5, False)])
+def test_a_video_without_the_suits_colours_points_to_the_mediapipe_pipeline(model, shown, points_to_mediapipe):
+    # arms down (no T-pose) and only the first `shown` colour classes ever seen: with half of the colours or fewer
+    # (a video of someone in ordinary clothes), the error says how many appear and names pipelines/mediapipe.yaml
+    det = detections_from(model, np.repeat(_arms_down(tpose_points())[None], 6, axis=0))
+    det["centres"][:, shown:] = np.nan
+    with pytest.raises(NodeError) as err:
+        run_node(posture_kalman, detections=det, colors=model)
+    hint = err.value.hint or ""
+    assert ("pipelines/mediapipe.yaml" in hint) is points_to_mediapipe
+    if points_to_mediapipe:
+        assert f"Only {shown} of the suit's {len(model.classes)} colours" in hint
+
+
 def test_missing_patch_is_named(model):
     truth = _still(6)
     visible = np.ones((6, N_JOINTS), bool)

@@ -227,7 +227,7 @@ def unknown_background_warning(known_pct: float, unknown_box: np.ndarray, tracke
     where = (f"where no torso patch is seen ({int(unseen.sum())} frames) the actor stands on it for less than "
              f"{UNKNOWN_RUN_MIN_FRAMES} frames in a row" if unseen.any() else "the torso's patches are seen on every frame, so the patches place the body")
     return (f"the background is known on {known_pct:.0f} % of the image only (the actor stays on the same spot); "
-            f"not needed: {where}"), False
+            f"that does not matter here: {where}"), False
 
 
 @node(

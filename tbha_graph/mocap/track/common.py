@@ -76,6 +76,9 @@ def start_frame(centres, areas, joints_of, params: StartParams, fps: float) -> t
     if not isinstance(found, PostureResult):
         return found
     n = min(params.init_frames, len(centres))
+    used = [c for c, joints in enumerate(joints_of) if joints]
+    seen = np.isfinite(np.asarray(centres[:n], dtype=np.float64)[..., 0]).any(axis=(0, 2))
+    n_seen = int(seen[used].sum())
     what = []
     if found.missing:
         what.append("patches not found: " + "; ".join(found.missing))
@@ -86,7 +89,11 @@ def start_frame(centres, areas, joints_of, params: StartParams, fps: float) -> t
         hint="the actor must stand facing the camera in a T-pose, every patch visible, at the start of the video; "
         "otherwise check the suit file matches the suit worn (--set colors.suit=my_suit.yaml; "
         "python -m tbha_graph.mocap.color.sample_suit samples its real colours from the take), the light (a patch "
-        "washed out to white, or too dark: colors.min_luma), or raise init_frames",
+        "washed out to white, or too dark: colors.min_luma), or raise init_frames"
+        + (f". Only {n_seen} of the suit's {len(used)} colours {'appears' if n_seen == 1 else 'appear'} at all in those "
+           "frames: if the video shows "
+           "someone without the suit, use pipelines/mediapipe.yaml (MediaPipe Pose: ordinary clothes)"
+           if n_seen <= len(used) // 2 else ""),
     )
 
 
