@@ -61,6 +61,38 @@ def test_range_and_downscale(coded_mp4):
     assert run_node(video, {"path": str(coded_mp4), "stop": 1000})["video"].stop == N
 
 
+def _set_display_rotation(path, matrix) -> None:
+    """Write an MP4's display matrix (its track header's 3x3 transformation, as a phone filming upright in portrait
+    writes it) in place: ``matrix`` the nine 32-bit fixed-point values of ISO/IEC 14496-12's ``tkhd``."""
+    import struct
+
+    data = bytearray(path.read_bytes())
+    at = data.find(b"tkhd")
+    version = data[at + 4]
+    # after the box type: version/flags 4, times 8 or 16, track id 4, reserved 4, duration 4 or 8, reserved 8,
+    # layer 2, alternate group 2, volume 2, reserved 2
+    off = at + 4 + 4 + (8 if version == 0 else 16) + 4 + 4 + (4 if version == 0 else 8) + 8 + 2 + 2 + 2 + 2
+    data[off:off + 36] = struct.pack(">9i", *matrix)
+    path.write_bytes(data)
+
+
+def test_a_phone_video_filmed_in_portrait_is_read_upright(tmp_path):
+    # a phone stores portrait video as landscape pixels plus a display rotation; the frames must come out as the
+    # phone shows them (here: turned 90 degrees clockwise), with the size reported to match, or every pixel
+    # position downstream (tracks, camera centre, overlay) is in a frame lying on its side
+    img = np.full((H, W, 3), 255, np.uint8)
+    img[:16, :16] = (0, 0, 255)  # red in the stored frame's top-left corner
+    path = tmp_path / "portrait.mp4"
+    write_video(path, [img] * 6, fps=25.0)
+    _set_display_rotation(path, (0, 1 << 16, 0, -(1 << 16), 0, 0, 0, 0, 1 << 30))
+    clip = run_node(video, {"path": str(path)})["video"]
+    assert (clip.width, clip.height, clip.n_frames) == (H, W, 6)
+    upright = np.rot90(img, k=-1)
+    for _, f in iter_frames(clip):
+        assert f.shape == (W, H, 3)
+        assert np.abs(f.astype(int) - upright).mean() < 4.0  # codec noise only
+    assert all(f.shape == (W, H, 3) for _, f in iter_frames_at(clip, [1, 4]))  # after a seek too
+
 
 @pytest.mark.parametrize("gap", [0, 3, 100])
 def test_frames_at_given_indices_are_the_streamed_ones(coded_mp4, monkeypatch, gap):
