@@ -10,7 +10,8 @@ absl's logging, which the Python package never initialises).
 :func:`filtered_stderr` puts a pipe in place of descriptor 2 while a block runs; a thread copies what arrives to the
 real standard error as it comes, except the lines :func:`is_chatter` recognises, which it counts. Errors (absl's
 ``E``/``F`` lines) and everything else, this program's own progress and log lines included, pass. Setting the
-environment variable ``TBHA_MEDIAPIPE_LOG=1`` leaves descriptor 2 alone (every line shown).
+environment variable ``TBHA_MEDIAPIPE_LOG=1`` leaves descriptor 2 alone (every line shown): the way to see everything
+should the process die inside MediaPipe, when what was still in the pipe is lost with it.
 """
 from __future__ import annotations
 
