@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from tbha_graph.core.testing import run_node
-from tbha_graph.mocap.detect.native_log import SHOW_ENV, filtered_stderr, is_chatter
+from tbha_graph.mocap.detect.native_log import SHOW_ENV, chatter_start, filtered_stderr
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from test_keypoints import require_mediapipe  # noqa: E402
@@ -38,8 +38,9 @@ KEPT = [
 
 
 def test_chatter_lines_are_recognised_and_nothing_else():
-    assert all(is_chatter(line) for line in CHATTER)
-    assert not any(is_chatter(line) for line in KEPT)
+    assert all(chatter_start(line) == 0 for line in CHATTER)
+    assert not any(chatter_start(line) is not None for line in KEPT)
+    assert chatter_start(b"detect  40%" + CHATTER[2]) == len(b"detect  40%")  # after a progress bar's unended line
 
 
 def test_the_filter_drops_the_chatter_and_passes_the_rest_progress_bars_included(capfd, monkeypatch):

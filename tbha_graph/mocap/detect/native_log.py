@@ -8,7 +8,7 @@ can act on. No environment variable turns them off (``GLOG_minloglevel`` and ``T
 absl's logging, which the Python package never initialises).
 
 :func:`filtered_stderr` puts a pipe in place of descriptor 2 while a block runs; a thread copies what arrives to the
-real standard error as it comes, except the lines :func:`is_chatter` recognises, which it counts. Errors (absl's
+real standard error as it comes, except MediaPipe's lines (:data:`CHATTER`, :func:`chatter_start`), which it counts. Errors (absl's
 ``E``/``F`` lines) and everything else, this program's own progress and log lines included, pass. Setting the
 environment variable ``TBHA_MEDIAPIPE_LOG=1`` leaves descriptor 2 alone (every line shown): the way to see everything
 should the process die inside MediaPipe, when what was still in the pipe is lost with it.
@@ -33,11 +33,6 @@ CHATTER = re.compile(
 
 #: Environment variable that, set to 1, shows MediaPipe's own lines as they are
 SHOW_ENV = "TBHA_MEDIAPIPE_LOG"
-
-
-def is_chatter(line: bytes) -> bool:
-    """True for one of MediaPipe's info or warning lines (``line`` without its newline)."""
-    return CHATTER.match(line) is not None
 
 
 def chatter_start(line: bytes) -> int | None:
