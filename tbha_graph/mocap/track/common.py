@@ -91,9 +91,8 @@ def start_frame(centres, areas, joints_of, params: StartParams, fps: float) -> t
         "python -m tbha_graph.mocap.color.sample_suit samples its real colours from the take), the light (a patch "
         "washed out to white, or too dark: colors.min_luma), or raise init_frames"
         + (f". Only {n_seen} of the suit's {len(used)} colours {'appears' if n_seen == 1 else 'appear'} at all in those "
-           "frames: if the video shows "
-           "someone without the suit, use pipelines/mediapipe.yaml (MediaPipe Pose: ordinary clothes)"
-           if n_seen <= len(used) // 2 else ""),
+           "frames: if the video shows someone without the suit, use pipelines/mediapipe.yaml (MediaPipe Pose: ordinary "
+           "clothes)" if n_seen <= len(used) // 2 else ""),
     )
 
 
