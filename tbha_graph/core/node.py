@@ -28,7 +28,6 @@ import builtins
 import contextvars
 import inspect
 import re
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,6 +36,7 @@ from typing import Annotated, Any, Callable, Iterable, Iterator, Mapping, TypeVa
 from pydantic import BaseModel, ConfigDict
 
 from .errors import RegistryError
+from .scratch import remove_at_exit, scratch_folder
 from .types import PortType
 
 T = TypeVar("T")
@@ -238,7 +238,8 @@ class Context:
         if self._work_dir is None and self._work_root is not None:
             self._work_dir = Path(self._work_root) / f"{self.node_id}-{time.monotonic_ns()}"
         if self._work_dir is None:
-            self._work_dir = Path(tempfile.mkdtemp(prefix=f"tbha-{self.node_id}-"))
+            self._work_dir = scratch_folder(f"tbha-{self.node_id}-")  # nothing takes its files: gone at exit
+            remove_at_exit(self._work_dir)
         self._work_dir = Path(self._work_dir)
         self._work_dir.mkdir(parents=True, exist_ok=True)
         return self._work_dir

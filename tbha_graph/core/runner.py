@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import shutil
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -13,6 +12,7 @@ from .graph import Graph, build_graph
 from .progress import QUIET, Reporter
 from .registry import Registry
 from .rundir import check_out_dir, write_run_dir
+from .scratch import remove_at_exit, scratch_folder
 from .scheduler import RunResult, run_local, targets_of
 from .spec import PipelineDecl, apply_sets, apply_vars, read_pipeline
 from .errors import PipelineErrors, TbhaError
@@ -70,8 +70,9 @@ def run_graph(
         check_out_dir(Path(out_dir))  # refuse a folder that is not ours before spending time on the run
     ids = targets_of(graph, outputs)
     t0 = time.perf_counter()
-    work_root = Path(tempfile.mkdtemp(prefix="tbha-run-"))
+    work_root = scratch_folder("tbha-run-")
     private = None
+    finished = False
     try:
         with using_cache_dir(c.root if c is not None else None):  # file-hash memo of this run's cache
             if executor == "local":
@@ -88,9 +89,13 @@ def run_graph(
             run = RunResult(graph, results, time.perf_counter() - t0)
             if out_dir is not None:
                 write_run_dir(run, Path(out_dir), executor)
+            finished = True
             return run
     finally:
-        # file outputs were moved into the cache, so the work folders can go; a private cache only once the
-        # outputs are written (without out_dir its entries hold the run's values, as the work folders do)
-        if c is not None or (private is not None and out_dir is not None):
+        # With a cache the file outputs were moved into it: the work folders can go now. Without one (or with
+        # the dask executor's private cache, which lives in work_root) the returned values are paths into
+        # work_root: it goes when the process exits; a failed run returned nothing, so it goes now.
+        if c is not None or not finished:
             shutil.rmtree(work_root, ignore_errors=True)
+        else:
+            remove_at_exit(work_root)

@@ -1,7 +1,6 @@
 """Run one node directly, as the scheduler would (params validated, outputs checked). For tests."""
 from __future__ import annotations
 
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +13,7 @@ def run_node(spec: NodeSpec, params: dict | None = None, work_dir: Path | None =
     Returns ``{output_port: value}``.
     """
     p = spec.params.model_validate(params or {})
-    ctx = Context(spec.type, p, work_dir=work_dir or Path(tempfile.mkdtemp(prefix="tbha-test-")))
+    ctx = Context(spec.type, p, work_dir=work_dir)  # without one: a scratch folder removed at exit
     for name, port in spec.inputs.items():
         if name not in inputs:
             if port.required:
