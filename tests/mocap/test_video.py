@@ -171,3 +171,80 @@ def test_decoding_failure_names_the_frame(tmp_path):
     # the frames before the cut are whole: a clip that stops there reads without an error
     short = run_node(video, {"path": str(cut), "stop": len(seen)})["video"]
     assert [i for i, _ in iter_frames(short)] == seen
+
+
+def _timed_mp4(path, pts_600ths, codec="libx264"):
+    """An MP4 whose frame ``i`` (stripe-coded with ``i``) is shown at ``pts_600ths[i] / 600`` s, as a phone's
+    variable frame rate writes it (libx264: B-frames, so the file also has a ``ctts`` table)."""
+    from fractions import Fraction
+
+    av = pytest.importorskip("av")
+    with av.open(str(path), "w") as c:
+        s = c.add_stream(codec, rate=30)
+        s.width, s.height, s.pix_fmt = W, H, "yuv420p"
+        s.codec_context.time_base = s.time_base = Fraction(1, 600)
+        for i, t in enumerate(pts_600ths):
+            frame = av.VideoFrame.from_ndarray(_coded_frame(i)[..., ::-1].copy(), format="rgb24")
+            frame.pts, frame.time_base = int(t), Fraction(1, 600)
+            for packet in s.encode(frame):
+                c.mux(packet)
+        for packet in s.encode():
+            c.mux(packet)
+    return path
+
+
+def _io_video_warnings(path, **params) -> list[str]:
+    from tbha_graph.core.node import Context
+
+    ctx = Context("decode", video.params.model_validate({"path": str(path), **params}))
+    video.fn(ctx, None)
+    return ctx.warnings
+
+
+def test_a_phone_video_with_a_variable_frame_rate_is_flagged(tmp_path):
+    """Phones drop to fewer frames a second in dim light; the capture spaces frames evenly at the file's average
+    rate, so io.video reads the frame times from the MP4's index and says so, with the command that fixes it."""
+    from tbha_graph.mocap.io.mp4_times import frame_times
+
+    steps = [20] * 20 + [30] * 10 + [20] * 19  # 30 fps, a third of a second at 20 fps, 30 fps again
+    pts = np.concatenate([[0], np.cumsum(steps)])
+    path = _timed_mp4(tmp_path / "phone.mp4", pts)
+    assert np.allclose(frame_times(path), pts / 600)  # showing order, B-frames reordered
+    assert [_decode(f) for _, f in iter_frames(run_node(video, {"path": str(path)})["video"])] == list(range(50))
+    (warning,) = _io_video_warnings(path)
+    assert "frame times are uneven" in warning and "10 of 49 intervals" in warning and "33.3 ms" in warning
+    assert "(33.3-50.0 ms)" in warning and "missing frame" not in warning
+    assert "ffmpeg -i phone.mp4 -vf fps=30 -c:v libx264 -crf 18 phone_cfr.mp4" in warning
+    assert _io_video_warnings(path, stop=20) == []  # the frames used are evenly spaced
+    assert _io_video_warnings(path, start=31) == []
+
+
+def test_a_dropped_frame_is_flagged_and_an_even_video_is_not(tmp_path, coded_mp4):
+    from tbha_graph.mocap.io.mp4_times import frame_times
+
+    pts = 20 * np.array([i if i < 25 else i + 1 for i in range(40)])  # the 26th frame's moment has no frame
+    path = _timed_mp4(tmp_path / "dropped.mp4", pts)
+    (warning,) = _io_video_warnings(path)
+    assert "1 of 39 intervals" in warning and "1 frame(s) follow a gap of a missing frame or more (frame 25)" in warning
+    even = _timed_mp4(tmp_path / "even.mp4", 20 * np.arange(40))
+    assert np.allclose(np.diff(frame_times(even)), 1 / 30) and _io_video_warnings(even) == []
+    assert _io_video_warnings(coded_mp4) == []  # OpenCV's own mp4v file (stts only)
+
+
+def test_frame_times_of_files_without_an_mp4_index_are_none(tmp_path, coded_mp4):
+    """An AVI, a cut MP4 (its index, written last, missing) or a damaged one: no times, no error."""
+    from tbha_graph.mocap.io.mp4_times import frame_times
+
+    avi = tmp_path / "take.avi"
+    write_video(avi, [_coded_frame(i) for i in range(5)], fps=25.0)
+    assert frame_times(avi) is None
+    data = coded_mp4.read_bytes()
+    assert frame_times(coded_mp4) is not None
+    for i, cut in enumerate((len(data) // 2, len(data) - 40, 12)):
+        (tmp_path / f"cut{i}.mp4").write_bytes(data[:cut])
+        assert frame_times(tmp_path / f"cut{i}.mp4") is None
+    at = data.find(b"stts")
+    damaged = bytearray(data)
+    damaged[at + 8: at + 12] = (10 ** 6).to_bytes(4, "big")  # an entry count the box cannot hold
+    (tmp_path / "damaged.mp4").write_bytes(bytes(damaged))
+    assert frame_times(tmp_path / "damaged.mp4") is None

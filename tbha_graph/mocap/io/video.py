@@ -22,6 +22,7 @@ from ...core.filehash import file_content_hash
 from ...core.node import InputPath, node, optional
 from ..ports import VIDEO, VIDEO_FILE, VideoClip
 from .avi_cut import avi_cut_frame
+from .mp4_times import frame_times, uneven_frame_times
 
 _OPEN_HINT = "check that the file is a video OpenCV can decode (e.g. .mp4 with mp4v/H.264, .avi with MJPG)"
 
@@ -229,7 +230,9 @@ def video(ctx, file) -> dict:
 
     The file is the ``path`` param, or the ``file`` input when connected (a rendered video).
     Output ``video``: a VideoClip (absolute path, sha256 of the content, frame range [start, stop),
-    fps, frame size in pixels after downscaling by ``scale``).
+    fps, frame size in pixels after downscaling by ``scale``). Warns when an MP4/QuickTime file's frame times
+    over the range are uneven (a variable frame rate or dropped frames, :mod:`.mp4_times`): the capture spaces
+    frames evenly.
     """
     p: VideoParams = ctx.params
     if (file is None) == (p.path is None):
@@ -237,4 +240,22 @@ def video(ctx, file) -> dict:
             "give the video either as the 'path' param or through the 'file' input, not both or neither",
             hint=f"e.g. --set {ctx.node_id}.path=my_take.mp4",
         )
-    return {"video": probe_video(file if file is not None else p.path, start=p.start, stop=p.stop, scale=p.scale, fps=p.fps)}
+    clip = probe_video(file if file is not None else p.path, start=p.start, stop=p.stop, scale=p.scale, fps=p.fps)
+    times = frame_times(clip.path)
+    uneven = uneven_frame_times(times, clip.start, clip.stop) if times is not None and len(times) >= clip.stop else None
+    if uneven is not None:
+        ctx.warn(uneven_message(Path(clip.path), uneven, clip.fps))
+    return {"video": clip}
+
+
+def uneven_message(path: Path, u: dict, fps: float) -> str:
+    """What a user is told about a video whose frame times are uneven (:func:`.mp4_times.uneven_frame_times`)."""
+    rate = max(1, round(1e3 / u["median_ms"]))
+    gaps = u["gaps"]
+    dropped = (f"; {len(gaps)} frame(s) follow a gap of a missing frame or more (frame {', '.join(map(str, gaps[:5]))}"
+               f"{', ...' if len(gaps) > 5 else ''})") if gaps else ""
+    return (f"video {path.name}: its frame times are uneven (a variable frame rate, as phones record in dim light): "
+            f"{u['off']} of {u['intervals']} intervals between frames differ from {u['median_ms']:.1f} ms by more than 10 % "
+            f"({u['min_ms']:.1f}-{u['max_ms']:.1f} ms){dropped}. The capture spaces the frames evenly at {fps:.3g} fps, "
+            f"so the motion's timing and speeds are off where they differ: convert the video to a constant rate first, "
+            f"e.g. ffmpeg -i {path.name} -vf fps={rate} -c:v libx264 -crf 18 {path.stem}_cfr.mp4")
