@@ -9,7 +9,8 @@ import pytest
 
 from tbha_graph.mocap.io.video import probe_video
 from tbha_graph.mocap.reconstruct.take_model import SilhouetteField
-from tbha_graph.mocap.segment.silhouette import (SilhouetteParams, background_model, body_boxes, distance_outside,
+from tbha_graph.mocap.bundles.tracks import body_boxes
+from tbha_graph.mocap.segment.silhouette import (SilhouetteParams, background_model, distance_outside,
                                                  silhouette_clip, unknown_background_warning)
 from tbha_graph.mocap.skeleton import TORSO_JOINTS
 

@@ -65,3 +65,21 @@ def read_tracks(tracks: dict, where: str = "tracks") -> Tracks:
         raise NodeError(f"{where}: image size {width}x{height} px is not positive")
     fps = float(np.asarray(tracks.get("fps", 0.0)))
     return Tracks(points=points, tracked=tracked, fps=fps, width=width, height=height)
+
+
+def body_boxes(points: np.ndarray, tracked: np.ndarray, margin: float) -> np.ndarray:
+    """Per frame where the whole actor may be ``(n, 4)`` ``[x0, y0, x1, y1]`` full-resolution px, from the
+    *tracked* points ``(n, 16, 2)`` only (a lost point the tracker holds may be stale): their box, made at least
+    the body's height tall downwards from its top (the body's height in px: the median height of the frames
+    with 12 or more tracked points), grown by ``margin`` times that height on every side. NaN rows: nothing
+    tracked (the actor may be anywhere)."""
+    ok = tracked & np.isfinite(points).all(axis=-1)
+    x = np.where(ok, points[..., 0], np.nan)
+    y = np.where(ok, points[..., 1], np.nan)
+    # fmin / fmax skip NaN like nanmin / nanmax (which call them) without the all-NaN row's warning
+    box = np.stack([np.fmin.reduce(x, 1), np.fmin.reduce(y, 1), np.fmax.reduce(x, 1), np.fmax.reduce(y, 1)], axis=1)
+    full = ok.sum(axis=1) >= 12
+    height = float(np.median(box[full, 3] - box[full, 1])) if full.any() else float(np.nanmax(box[:, 3] - box[:, 1], initial=100.0))
+    box[:, 3] = np.maximum(box[:, 3], box[:, 1] + height)
+    g = margin * height
+    return box + np.array([-g, -g, g, g])

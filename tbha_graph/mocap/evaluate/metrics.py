@@ -63,7 +63,7 @@ from ...core.node import node, optional
 from ...core.types import Json
 from .verdict import verdict
 from ..bundles.truth import check_ground_truth, truth_joints2d, truth_visibility
-from ..ports import CAMERA, ERRORS, JOINTS3D_EXPORT, METRICS, MOTION, TRACKS2D, TRUTH
+from ..ports import CAMERA, ERRORS, JOINTS3D_EXPORT, METRICS, MOTION, REPORT, TRACKS2D, TRUTH
 from ..body import DEFAULT_ANKLE_HEIGHT
 from ..skeleton import JOINT_NAMES, N_JOINTS, PATCHED_JOINTS
 from . import measures as m
@@ -282,11 +282,13 @@ def compute_metrics(
                                               "export_mpjpe_mm / export_pa_mpjpe_mm beside the solver's motion"),
         "extra": optional(Json(), "figures from other nodes' reports (e.g. filter.foot_contact's foot sliding), "
                                   "merged into metrics: their top-level numbers and strings"),
+        "camera_motion": optional(REPORT, "calibrate.camera_motion's report: camera_shift_px and camera_moved join the "
+                                          "metrics"),
     },
     outputs={"metrics": METRICS, "errors": ERRORS},
     params=MetricsParams,
 )
-def metrics(ctx, motion, tracks, camera, truth, raw_motion, extra, exported):
+def metrics(ctx, motion, tracks, camera, truth, raw_motion, extra, exported, camera_motion):
     """Quality figures of a capture (reprojection, bone-length stability, jitter) and, with ground
     truth, its accuracy (MPJPE, PA-MPJPE, 2D error, acceleration error); per-frame errors for plots.
 
@@ -301,6 +303,8 @@ def metrics(ctx, motion, tracks, camera, truth, raw_motion, extra, exported):
         notes = [w for w in extra.get("warnings", []) if isinstance(w, str)]
         if notes:  # warnings of the node that made the report reach the metrics (and the summary)
             result["warnings"] = list(result.get("warnings", [])) + [w for w in notes if w not in result.get("warnings", [])]
+    if isinstance(camera_motion, dict):  # the camera's own motion (is it still?), when measured
+        result.update({k: camera_motion.get(k) for k in ("camera_shift_px", "camera_moved") if k in camera_motion})
     result.setdefault("warnings", [])  # always there (docs/metrics.md): an empty list when no node warned
     result["verdict"], result["verdict_reasons"] = verdict(result)  # ok | doubtful | failed (evaluate/verdict.py)
     return {"metrics": result, "errors": errors}

@@ -42,7 +42,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.errors import NodeError
 from ...core.node import node
-from ..bundles.tracks import read_tracks
+from ..bundles.tracks import body_boxes, read_tracks
 from ..io.video import iter_frames
 from ..ports import SILHOUETTE, TRACKS2D, VIDEO, VideoClip
 from ..runs import runs_of, runs_text
@@ -76,24 +76,6 @@ def _small(frame: np.ndarray, scale: float) -> np.ndarray:
         return frame
     h, w = frame.shape[:2]
     return cv2.resize(frame, (max(1, round(w * scale)), max(1, round(h * scale))), interpolation=cv2.INTER_AREA)
-
-
-def body_boxes(points: np.ndarray, tracked: np.ndarray, margin: float) -> np.ndarray:
-    """Per frame where the whole actor may be ``(n, 4)`` ``[x0, y0, x1, y1]`` full-resolution px, from the
-    *tracked* points ``(n, 16, 2)`` only (a lost point the tracker holds may be stale): their box, made at least
-    the body's height tall downwards from its top (the body's height in px: the median height of the frames
-    with 12 or more tracked points), grown by ``margin`` times that height on every side. NaN rows: nothing
-    tracked (the actor may be anywhere)."""
-    ok = tracked & np.isfinite(points).all(axis=-1)
-    x = np.where(ok, points[..., 0], np.nan)
-    y = np.where(ok, points[..., 1], np.nan)
-    # fmin / fmax skip NaN like nanmin / nanmax (which call them) without the all-NaN row's warning
-    box = np.stack([np.fmin.reduce(x, 1), np.fmin.reduce(y, 1), np.fmax.reduce(x, 1), np.fmax.reduce(y, 1)], axis=1)
-    full = ok.sum(axis=1) >= 12
-    height = float(np.median(box[full, 3] - box[full, 1])) if full.any() else float(np.nanmax(box[:, 3] - box[:, 1], initial=100.0))
-    box[:, 3] = np.maximum(box[:, 3], box[:, 1] + height)
-    g = margin * height
-    return box + np.array([-g, -g, g, g])
 
 
 def box_masks(boxes: np.ndarray, shape: tuple[int, int], scale: float) -> np.ndarray:
