@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_blender_import import DEFAULT_AXES, blender, cmu_rotations, expected_points  # noqa: F401 (fixtures)
+from test_blender_import import DEFAULT_AXES, _bpy_missing, cmu_motion, expected_points
 
 from tbha_graph.core.errors import NodeError
 from tbha_graph.core.testing import run_node
@@ -55,6 +55,18 @@ READ_BACK = textwrap.dedent(r"""
 """)
 
 
+@pytest.fixture(scope="module")
+def blender() -> None:
+    reason = _bpy_missing()
+    if reason:
+        pytest.skip(reason)
+
+
+@pytest.fixture(scope="module")
+def cmu_rotations() -> dict[str, np.ndarray]:
+    return cmu_motion()
+
+
 def read_back(files: dict[str, Path], fps: int) -> dict:
     job = {"files": {k: str(v) for k, v in files.items()}, "fps": fps}
     proc = subprocess.run([sys.executable, "-c", READ_BACK, json.dumps(job)],
@@ -63,7 +75,7 @@ def read_back(files: dict[str, Path], fps: int) -> dict:
     return json.loads([line for line in proc.stdout.splitlines() if line.startswith("{")][-1])
 
 
-def test_fbx_and_gltf_read_back_into_blender_where_the_fk_puts_the_joints(blender, cmu_rotations, tmp_path):  # noqa: F811
+def test_fbx_and_gltf_read_back_into_blender_where_the_fk_puts_the_joints(blender, cmu_rotations, tmp_path):
     rot = cmu_rotations
     bvh = run_node(export_bvh, {"sheet": False}, work_dir=tmp_path / "bvh", rotations=rot)["bvh"]
     files = {"fbx": run_node(export_fbx, {}, work_dir=tmp_path / "fbx", bvh=bvh)["fbx"],
@@ -82,7 +94,7 @@ def test_fbx_and_gltf_read_back_into_blender_where_the_fk_puts_the_joints(blende
     assert np.ptp(want, axis=0).max() > 0.5  # the walk covers metres: the comparison can tell
 
 
-def test_without_blender_the_node_says_how_to_install_it(tmp_path, monkeypatch, cmu_rotations):  # noqa: F811
+def test_without_blender_the_node_says_how_to_install_it(tmp_path, monkeypatch, cmu_rotations):
     import importlib.util
 
     bvh = run_node(export_bvh, {"sheet": False}, work_dir=tmp_path / "bvh", rotations=cmu_rotations)["bvh"]
@@ -93,7 +105,7 @@ def test_without_blender_the_node_says_how_to_install_it(tmp_path, monkeypatch, 
     assert "bpy" in e.value.format() and "pip install --no-deps bpy==5.0.1" in e.value.format()
 
 
-def test_a_file_blender_cannot_read_is_a_clear_error(blender, tmp_path):  # noqa: F811
+def test_a_file_blender_cannot_read_is_a_clear_error(blender, tmp_path):
     bad = tmp_path / "broken.bvh"
     bad.write_text("HIERARCHY\nROOT hips\n{\n  OFFSET 0 0\n")
     with pytest.raises(NodeError) as e:

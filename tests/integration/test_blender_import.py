@@ -154,6 +154,11 @@ def blender_errors_mm(imp: dict, rot: dict[str, np.ndarray], axes: np.ndarray, n
 
 @pytest.fixture(scope="module")
 def cmu_rotations() -> dict[str, np.ndarray]:
+    return cmu_motion()
+
+
+def cmu_motion() -> dict[str, np.ndarray]:
+    """The ROTATIONS bundle of the CMU walk, every :data:`FRAME_STEP`-th frame."""
     rot = rotations16_from_bvh(CMU_CLIP)
     sl = slice(0, None, FRAME_STEP)
     return {**rot, "local_quat": rot["local_quat"][sl], "root_position": rot["root_position"][sl],
