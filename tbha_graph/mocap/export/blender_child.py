@@ -67,3 +67,12 @@ def convert_bvh(bvh: Path, out: Path, fmt: str, scale: float, timeout_s: float) 
     if report.get("status") != ["FINISHED"]:
         raise NodeError(f"Blender's {fmt.upper()} exporter did not finish: {report.get('status')}")
     return report
+
+
+def write_with_blender(ctx, bvh: Path, fmt: str) -> Path:
+    """A node's body: ``motion.<fmt>`` in the node's work folder from ``bvh`` (``ctx.params``: ``scale``,
+    ``timeout_s``), and a log line saying what Blender wrote."""
+    out = ctx.output_path(f"motion.{fmt}")
+    rep = convert_bvh(bvh, out, fmt, ctx.params.scale, ctx.params.timeout_s)
+    ctx.log(f"{'FBX' if fmt == 'fbx' else 'glTF'}: {len(rep['bones'])} bones, {rep['frames']} frames at {rep['fps']:g} fps (Blender)")
+    return out

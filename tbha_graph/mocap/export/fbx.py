@@ -13,7 +13,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from ...core.node import node
 from ...core.types import File
 from ..ports import BVH_FILE
-from .blender_child import convert_bvh
+from .blender_child import write_with_blender
 
 FBX_FILE = File(kind="fbx", suffix=".fbx", doc="an FBX motion file")
 
@@ -31,7 +31,4 @@ def export_fbx(ctx, bvh):
     """Convert the BVH into an FBX file with Blender (every frame keyed, bones named like the joints).
 
     Output ``fbx``: the file (``motion.fbx``)."""
-    out = ctx.output_path("motion.fbx")
-    rep = convert_bvh(bvh, out, "fbx", ctx.params.scale, ctx.params.timeout_s)
-    ctx.log(f"FBX: {len(rep['bones'])} bones, {rep['frames']} frames at {rep['fps']:g} fps (Blender)")
-    return out
+    return write_with_blender(ctx, bvh, "fbx")

@@ -10,7 +10,7 @@ from __future__ import annotations
 from ...core.node import node
 from ...core.types import File
 from ..ports import BVH_FILE
-from .blender_child import convert_bvh
+from .blender_child import write_with_blender
 from .fbx import BlenderExportParams
 
 GLB_FILE = File(kind="glb", suffix=".glb", doc="a binary glTF 2.0 file")
@@ -21,7 +21,4 @@ def export_gltf(ctx, bvh):
     """Convert the BVH into a binary glTF file with Blender (every frame sampled, bones named like the joints).
 
     Output ``glb``: the file (``motion.glb``)."""
-    out = ctx.output_path("motion.glb")
-    rep = convert_bvh(bvh, out, "glb", ctx.params.scale, ctx.params.timeout_s)
-    ctx.log(f"glTF: {len(rep['bones'])} bones, {rep['frames']} frames at {rep['fps']:g} fps (Blender)")
-    return out
+    return write_with_blender(ctx, bvh, "glb")
