@@ -14,13 +14,12 @@ again. Each task's private work folder is removed when the task ends (its files 
 from __future__ import annotations
 
 import shutil
-import tempfile
-from pathlib import Path
 
 from ..cache import Cache, CorruptEntry
 from ..errors import TbhaError
 from ..graph import Graph
 from ..progress import Reporter
+from ..scratch import scratch_folder
 from ..scheduler import NodeResult, execute_node
 
 CORRUPT = "corrupt-upstream"
@@ -29,7 +28,7 @@ CORRUPT = "corrupt-upstream"
 def _task(node_id: str, graph: Graph, cache_root: str, *upstream: NodeResult) -> NodeResult:
     cache = Cache(cache_root)
     inputs = {r.node_id: r for r in upstream}
-    work = Path(tempfile.mkdtemp(prefix=f"tbha-dask-{node_id}-"))
+    work = scratch_folder(f"tbha-dask-{node_id}-")  # removed below: the cache holds the results
     try:
         res = execute_node(graph.nodes[node_id], graph, inputs, cache, work_root=work)
     except CorruptEntry as e:
