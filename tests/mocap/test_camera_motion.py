@@ -50,10 +50,10 @@ def _truth_tracks():
 def test_the_bundled_samples_still_camera_is_still():
     report, ctx = _run(SAMPLE)
     assert not report["camera_moved"] and ctx.warnings == []
-    assert report["camera_shift_px"] < 0.35  # measured 0.25 (the codec's noise, and corners on the actor's edge)
+    assert report["camera_shift_px"] < 0.28  # measured 0.19 (the codec's noise, and corners on the actor's edge)
     assert report["camera_motion_frames_judged"] == report["camera_motion_frames_sampled"] == 18
     masked, ctx = _run(SAMPLE, _truth_tracks())  # the actor's box left out
-    assert not masked["camera_moved"] and masked["camera_shift_px"] < 0.15 and ctx.warnings == []  # measured 0.10
+    assert not masked["camera_moved"] and masked["camera_shift_px"] < 0.22 and ctx.warnings == []  # measured 0.15
 
 
 def test_a_hand_held_camera_is_measured_and_named(tmp_path):
@@ -68,7 +68,7 @@ def test_a_hand_held_camera_is_measured_and_named(tmp_path):
     frames = np.array(report["frames"])
     want = np.array([corner_shift(motions[f], 640, 480) for f in frames])
     got = np.array(report["shift_px"], float)
-    assert np.abs(got - want).max() < 0.3  # measured 0.20 (max shift 9.35 px against 9.31)
+    assert np.abs(got - want).max() < 0.35  # measured 0.24 (max shift 9.31 px against 9.31)
     (warning,) = ctx.warnings
     assert f"up to {got.max():.1f} px from frame 0's" in warning and "tripod" in warning
 
@@ -76,9 +76,9 @@ def test_a_hand_held_camera_is_measured_and_named(tmp_path):
 def test_a_bump_halfway_names_the_frames_after_it(tmp_path):
     motions = np.array([_similarity(0, 0, 0) if i < 45 else _similarity(0.0, 4.0, -3.0) for i in range(N)])
     report, ctx = _run(_moved_copy(tmp_path / "bumped.mp4", motions))
-    assert report["camera_moved"] and abs(report["camera_shift_px"] - 5.0) < 0.27  # measured 5.18
+    assert report["camera_moved"] and abs(report["camera_shift_px"] - 5.0) < 0.2  # measured 5.13
     assert "sampled frames 45-89" in ctx.warnings[0]
-    assert all(s < 0.35 for f, s in zip(report["frames"], report["shift_px"]) if f < 45)  # measured 0.25
+    assert all(s < 0.3 for f, s in zip(report["frames"], report["shift_px"]) if f < 45)  # measured 0.20
 
 
 def test_a_plain_background_cannot_be_judged_and_says_so(tmp_path):

@@ -7,7 +7,7 @@ This node measures it from the background:
 
 1. Frames sampled every ``step`` (at most ``max_samples``, and the last), greyscale, downscaled to at most
    ``max_width`` px wide.
-2. Corners (:func:`cv2.goodFeaturesToTrack`) on the first sampled frame, away from the actor: outside the box
+2. Corners (:func:`cv2.goodFeaturesToTrack`, cell by cell of a 4 x 4 grid) on the first sampled frame, away from the actor: outside the box
    where the actor may be (:func:`..bundles.tracks.body_boxes` from the tracks, when connected), spread over a
    quarter of the image's width or height at least (:data:`MIN_SPREAD`).
 3. Each later sample: the corners followed from the first frame (pyramidal Lucas-Kanade,
@@ -46,6 +46,8 @@ BACK_PX = 0.5
 #: the corners that judge a frame must spread over at least this fraction of the image's width or height (a few
 #: corners on one small thing, e.g. a part of the actor the tracks leave out, are not the background)
 MIN_SPREAD = 0.25
+#: corners are found in each cell of a GRID x GRID grid (:func:`grid_corners`)
+GRID = 4
 #: the actor's box (the tracks' points) grown by this fraction of the body's height on every side
 ACTOR_MARGIN = 0.15
 
@@ -67,6 +69,22 @@ def _inside(points: np.ndarray, box: np.ndarray) -> np.ndarray:
     if not np.isfinite(box).all():
         return np.zeros(len(points), bool)
     return (points[:, 0] >= box[0]) & (points[:, 0] <= box[2]) & (points[:, 1] >= box[1]) & (points[:, 1] <= box[3])
+
+
+def grid_corners(grey: np.ndarray, max_corners: int, cells: int = GRID) -> np.ndarray:
+    """``(k, 2)`` float32 corners (:func:`cv2.goodFeaturesToTrack`) found cell by cell of a ``cells`` x ``cells`` grid,
+    up to ``max_corners / cells²`` in each, each cell's quality relative to its own strongest corner: the
+    background's corners count even where something else in the picture (text, the actor) has far stronger ones."""
+    h, w = grey.shape
+    per = max(1, max_corners // cells**2)
+    out = []
+    for i in range(cells):
+        for j in range(cells):
+            y0, y1, x0, x1 = h * i // cells, h * (i + 1) // cells, w * j // cells, w * (j + 1) // cells
+            found = cv2.goodFeaturesToTrack(grey[y0:y1, x0:x1], maxCorners=per, qualityLevel=0.05, minDistance=8, blockSize=7)
+            if found is not None:
+                out.append(found.reshape(-1, 2) + np.array([x0, y0], np.float32))
+    return np.concatenate(out).astype(np.float32) if out else np.zeros((0, 2), np.float32)
 
 
 def spread(points: np.ndarray, size: tuple[int, int]) -> bool:
@@ -99,8 +117,7 @@ def background_shifts(clip: VideoClip, boxes: np.ndarray | None, p: CameraMotion
         if s < 1.0:
             g = cv2.resize(g, size, interpolation=cv2.INTER_AREA)
         if ref is None:
-            found = cv2.goodFeaturesToTrack(g, maxCorners=p.max_corners, qualityLevel=0.01, minDistance=8, blockSize=7)
-            pts0 = np.zeros((0, 2), np.float32) if found is None else found.reshape(-1, 2)
+            pts0 = grid_corners(g, p.max_corners)
             pts0 = pts0[~_inside(pts0, box_of(index))]
             ref = g
             frames.append(index)
