@@ -135,5 +135,7 @@ def report_port(doc: str) -> Json:
 
 
 BVH_FILE = File(kind="bvh", suffix=".bvh", doc="a BVH motion file")
+FBX_FILE = File(kind="fbx", suffix=".fbx", doc="an FBX motion file (export.fbx)")
+GLB_FILE = File(kind="glb", suffix=".glb", doc="a binary glTF 2.0 file (export.gltf)")
 IMAGE = File(kind="image", suffix=".png", doc="a PNG picture")
 MESH = File(kind="mesh", suffix=".obj", doc="an OBJ mesh file")

@@ -11,11 +11,8 @@ from __future__ import annotations
 from pydantic import BaseModel, ConfigDict, Field
 
 from ...core.node import node
-from ...core.types import File
-from ..ports import BVH_FILE
+from ..ports import BVH_FILE, FBX_FILE
 from .blender_child import write_with_blender
-
-FBX_FILE = File(kind="fbx", suffix=".fbx", doc="an FBX motion file")
 
 
 class BlenderExportParams(BaseModel):

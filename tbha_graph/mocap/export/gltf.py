@@ -8,12 +8,9 @@ with the BVH's.
 from __future__ import annotations
 
 from ...core.node import node
-from ...core.types import File
-from ..ports import BVH_FILE
+from ..ports import BVH_FILE, GLB_FILE
 from .blender_child import write_with_blender
 from .fbx import BlenderExportParams
-
-GLB_FILE = File(kind="glb", suffix=".glb", doc="a binary glTF 2.0 file")
 
 
 @node("export.gltf", version=1, inputs={"bvh": BVH_FILE}, outputs={"glb": GLB_FILE}, params=BlenderExportParams)
