@@ -109,6 +109,7 @@ def background_shifts(clip: VideoClip, boxes: np.ndarray | None, p: CameraMotion
     s = min(1.0, p.max_width / clip.width)
     size = (max(1, round(clip.width * s)), max(1, round(clip.height * s)))
     box_of = (lambda i: boxes[i - clip.start] * s) if boxes is not None else (lambda i: np.full(4, np.nan))
+    lk = dict(winSize=(15, 15), maxLevel=2, criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01))
     ref = pts0 = None
     A = np.array([[1.0, 0, 0], [0, 1.0, 0]])
     frames, shifts = [], []
@@ -127,7 +128,6 @@ def background_shifts(clip: VideoClip, boxes: np.ndarray | None, p: CameraMotion
                 break
             continue
         guess = (pts0 @ A[:, :2].T + A[:, 2]).astype(np.float32)
-        lk = dict(winSize=(15, 15), maxLevel=2, criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01))
         pts1, ok1, _ = cv2.calcOpticalFlowPyrLK(ref, g, pts0, guess.copy(), flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **lk)
         back, ok2, _ = cv2.calcOpticalFlowPyrLK(g, ref, pts1, pts0.copy(), flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **lk)
         good = (ok1.ravel() == 1) & (ok2.ravel() == 1) & (np.linalg.norm(back - pts0, axis=1) < BACK_PX)
