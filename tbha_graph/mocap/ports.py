@@ -36,13 +36,13 @@ from .body import Body
 from .bundles.colors import ColorModel
 from .bundles.detections import DETECTION_KEYS
 from .bundles.lens import LensEstimate
-from .bundles.video import VideoClip
+from .bundles.video import LensUndistortion, VideoClip
 from .camera import CameraModel
 from .skeleton import N_JOINTS
 from .suit import SuitSpec
 
 __all__ = [
-    "Bundle", "VideoClip", "VIDEO", "VIDEO_FILE", "DETECTIONS", "TRACKS2D", "CAMERA", "BODY", "SUIT", "COLORS",
+    "Bundle", "VideoClip", "LensUndistortion", "VIDEO", "VIDEO_FILE", "DETECTIONS", "TRACKS2D", "CAMERA", "BODY", "SUIT", "COLORS",
     "LENS", "MOTION", "ROTATIONS", "TRUTH", "SILHOUETTE", "SIDES", "ERRORS", "SMPL_PARAMS", "JOINTS3D_EXPORT", "METRICS", "REPORT", "report_port",
     "BVH_FILE", "IMAGE", "MESH", "JOINTS3D", "JOINTS2D",
 ]

@@ -1,7 +1,21 @@
 """The ``video`` port: a reference to (a frame range of) a video file, streamed by its consumers."""
 from __future__ import annotations
 
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class LensUndistortion(BaseModel):
+    """A lens calibration (``pipelines/checkerboard.yaml``'s ``lens.json``) applied to every frame as it is read:
+    the frame is remapped from the calibrated camera ``K`` with ``dist`` to an ideal pinhole camera of focal length
+    ``focal_px`` with square pixels and its principal point at the image centre ``((w - 1) / 2, (h - 1) / 2)``, the
+    camera every later stage assumes. ``K`` refers to the clip's frames (after ``scale``)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    K: list[list[float]] = Field(description="3x3 intrinsics of the calibrated camera at the clip's frame size, pixels")
+    dist: list[float] = Field(min_length=5, max_length=5, description="OpenCV distortion k1 k2 p1 p2 k3")
+    focal_px: float = Field(gt=0, description="focal length of the frames as read (the mean of K's fx and fy), pixels")
+    source: str = Field(description="the lens file it came from")
 
 
 class VideoClip(BaseModel):
@@ -16,6 +30,8 @@ class VideoClip(BaseModel):
     fps: float = Field(gt=0, description="frames per second")
     width: int = Field(description="frame width after scaling, pixels")
     height: int = Field(description="frame height after scaling, pixels")
+    lens: LensUndistortion | None = Field(None, description="lens distortion removed from every frame as it is read "
+                                          "(io.video's lens param); None: the frames as the file holds them")
 
     @property
     def n_frames(self) -> int:

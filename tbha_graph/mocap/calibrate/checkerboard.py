@@ -87,7 +87,7 @@ def find_corners(grey: np.ndarray, columns: int, rows: int) -> np.ndarray | None
     return cv2.cornerSubPix(grey, corners, (5, 5), (-1, -1), criteria)
 
 
-@node("calibrate.checkerboard", version=1, inputs={}, outputs={"camera": CAMERA, "report": REPORT}, params=CheckerboardParams)
+@node("calibrate.checkerboard", version=2, inputs={}, outputs={"camera": CAMERA, "report": REPORT}, params=CheckerboardParams)
 def checkerboard(ctx):
     """Intrinsics K and distortion from a checkerboard clip (OpenCV), extrinsics of the first view."""
     import cv2
@@ -131,5 +131,6 @@ def checkerboard(ctx):
         "images_seen": n_seen,
         "first_view_index": int(views[0][0]),
         "fx_px": float(K[0, 0]), "fy_px": float(K[1, 1]), "cx_px": float(K[0, 2]), "cy_px": float(K[1, 2]),
+        "width": int(size[0]), "height": int(size[1]),  # the frame size it holds for (io.video's lens checks it)
         "dist": dist5.tolist(),
     }}

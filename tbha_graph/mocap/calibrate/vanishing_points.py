@@ -29,8 +29,14 @@ No such pair (a plain background; a room seen square-on, whose sideways lines st
 gives ``focal_px`` None and a warning: the solver then estimates the focal length from the take alone. The
 assumption is a room whose main lines are perpendicular (floor tiles, walls): lines at other angles that
 happen to pass the tests give a wrong focal length, and the bootstrap cannot see that.
+
+A video read with a lens file (``io.video``'s ``lens``: its distortion removed, its focal length known) gives the
+file's focal length instead (sd :data:`LENS_FILE_SD_PCT`), and the floor's tilt from the lines when their own focal
+length agrees with it.
 """
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -344,7 +350,15 @@ def draw_lines(background: np.ndarray, found: dict, caption: str) -> np.ndarray:
     return img
 
 
-@node("calibrate.vanishing_points", version=2, inputs={"video": VIDEO},
+#: The focal length's standard deviation, per cent, given to a lens file's (``io.video``'s ``lens``): a checkerboard
+#: calibration of 10-20 views is good to a few tenths of a per cent
+LENS_FILE_SD_PCT = 0.5
+#: With a lens file, the room's floor tilt is used when the room's own focal length agrees with the file's within this
+#: fraction (the tilt is found with it)
+LENS_FILE_AGREE = 0.03
+
+
+@node("calibrate.vanishing_points", version=3, inputs={"video": VIDEO},
       outputs={"lens": LENS, "report": REPORT, "picture": IMAGE}, params=VanishingParams)
 def vanishing_points(ctx, video) -> dict:
     """The focal length from the room's straight lines (module docstring): ``lens`` for ``reconstruct.solve_take``
@@ -355,7 +369,15 @@ def vanishing_points(ctx, video) -> dict:
     background = median_background(video, p.samples, ctx.progress)
     found = estimate_focal(background, p)
     f, sd = found["focal_px"], found["focal_sd_pct"]
-    if f is not None and sd is not None and sd <= p.max_sd_pct:
+    calibrated = video.lens
+    if calibrated is not None:  # io.video removed a lens file's distortion: its focal length is known
+        agree = f is not None and found.get("up_cam") and abs(f / calibrated.focal_px - 1.0) < LENS_FILE_AGREE
+        lens = LensEstimate(focal_px=round(calibrated.focal_px, 2), focal_sd_pct=LENS_FILE_SD_PCT, width=video.width,
+                            height=video.height, source=f"lens file {Path(calibrated.source).name}: "
+                            f"{calibrated.focal_px:.0f} px" + (", the floor's tilt from the room's lines" if agree else ""),
+                            up_cam=found.get("up_cam") if agree else None, up_sd_deg=found.get("up_sd_deg") if agree else None)
+        ctx.log(lens.source + (f" (the room's lines gave {f:.0f} px)" if f is not None else ""))
+    elif f is not None and sd is not None and sd <= p.max_sd_pct:
         lens = LensEstimate(focal_px=f, focal_sd_pct=max(sd, 1e-3), width=video.width, height=video.height,
                             source=f"vanishing points of the room's lines: {f:.0f} px ± {sd:.1f} %"
                                    + (", and the floor's tilt" if found.get("up_cam") else ""),

@@ -22,6 +22,7 @@ from ...core.filehash import file_content_hash
 from ...core.node import InputPath, node, optional
 from ..ports import VIDEO, VIDEO_FILE, VideoClip
 from .avi_cut import avi_cut_frame
+from .lens_file import read_lens_file, undistort
 from .mp4_times import frame_times, uneven_frame_times
 
 _OPEN_HINT = "check that the file is a video OpenCV can decode (e.g. .mp4 with mp4v/H.264, .avi with MJPG)"
@@ -43,6 +44,10 @@ class VideoParams(BaseModel):
     fps: float | None = Field(
         None, gt=0, description="frame rate to use when the file does not state one (or to override it)",
         json_schema_extra={"unit": "Hz"},
+    )
+    lens: InputPath | None = Field(
+        None, description="lens.json of pipelines/checkerboard.yaml for this camera: its distortion is removed from "
+        "every frame as it is read (a wide-angle or action camera); null: the frames as they are",
     )
 
     @model_validator(mode="after")
@@ -69,8 +74,9 @@ def _open(path: Path) -> cv2.VideoCapture:
 
 
 def probe_video(path: str | Path, start: int = 0, stop: int | None = None, scale: float = 1.0,
-                fps: float | None = None) -> VideoClip:
-    """Check a video file and describe the frame range ``[start, stop)`` as a :class:`VideoClip`.
+                fps: float | None = None, lens: str | Path | None = None) -> VideoClip:
+    """Check a video file and describe the frame range ``[start, stop)`` as a :class:`VideoClip`; ``lens``: a
+    lens file (:func:`.lens_file.read_lens_file`) whose distortion :func:`iter_frames` removes from every frame.
 
     Reads the first frame of the range to prove the file decodes. Raises :class:`NodeError` naming the
     file when it does not exist, is not a video, has no frames, or ``start`` lies beyond its end.
@@ -116,7 +122,7 @@ def probe_video(path: str | Path, start: int = 0, stop: int | None = None, scale
     w, h = scaled_size(width, height, scale)
     return VideoClip(
         path=str(path), sha256=file_content_hash(path), start=int(start), stop=int(stop), scale=float(scale),
-        fps=float(fps), width=w, height=h,
+        fps=float(fps), width=w, height=h, lens=read_lens_file(lens, width, height, (w, h)) if lens is not None else None,
     )
 
 
@@ -173,13 +179,13 @@ def _checked(clip: VideoClip | None, path: Path, index: int, ok: bool, frame, re
     if clip is None:
         return frame
     if clip.scale < 1.0:
-        return cv2.resize(frame, (clip.width, clip.height), interpolation=cv2.INTER_AREA)
-    if frame.shape[1] != clip.width or frame.shape[0] != clip.height:
+        frame = cv2.resize(frame, (clip.width, clip.height), interpolation=cv2.INTER_AREA)
+    elif frame.shape[1] != clip.width or frame.shape[0] != clip.height:
         raise NodeError(
             f"video {path}: frame {index} is {frame.shape[1]}x{frame.shape[0]}, expected {clip.width}x{clip.height}",
             hint="the file changed since io.video read it; re-run io.video",
         )
-    return frame
+    return frame if clip.lens is None else undistort(frame, clip.lens)
 
 
 #: In :func:`iter_frames_at`, frames up to this many apart are reached by decoding the ones between (``grab``), farther
@@ -220,7 +226,7 @@ def iter_frames_at(clip: VideoClip, indices) -> Iterator[tuple[int, np.ndarray]]
 
 @node(
     "io.video",
-    version=2,
+    version=3,
     inputs={"file": optional(VIDEO_FILE, "a video produced upstream (instead of the path param)")},
     outputs={"video": VIDEO},
     params=VideoParams,
@@ -240,7 +246,8 @@ def video(ctx, file) -> dict:
             "give the video either as the 'path' param or through the 'file' input, not both or neither",
             hint=f"e.g. --set {ctx.node_id}.path=my_take.mp4",
         )
-    clip = probe_video(file if file is not None else p.path, start=p.start, stop=p.stop, scale=p.scale, fps=p.fps)
+    clip = probe_video(file if file is not None else p.path, start=p.start, stop=p.stop, scale=p.scale, fps=p.fps,
+                       lens=p.lens)
     times = frame_times(clip.path)
     uneven = uneven_frame_times(times, clip.start, clip.stop) if times is not None and len(times) >= clip.stop else None
     if uneven is not None:

@@ -805,7 +805,8 @@ def _solve_take(points, tracked, lengths, width, height, fps, p: SolveTakeParams
                            np.radians(max(float(lens.up_sd_deg or 0.0), FLOOR_SD_FLOOR_DEG)))
             report["floor_source"] = "room lines"
         starts, focal_prior = [f_room], (f_room, float(np.hypot(sd_room, p.lens_sd_floor_pct / 100.0)))
-        report["focal_source"] = f"room lines {f_room:.0f} px ± {100 * sd_room:.1f} %, refined by the take"
+        origin = "lens file" if lens.source.startswith("lens file") else "room lines"  # calibrate.vanishing_points says
+        report["focal_source"] = f"{origin} {f_room:.0f} px ± {100 * sd_room:.1f} %, refined by the take"
         q, estimated = p, False  # solved as with a given focal length, which the prior lets move by a few %
     else:
         # weak prior: lenses of ordinary cameras have f ~ 0.8-1.9 x the image width (log-normal around 1.2 W)
