@@ -228,6 +228,11 @@ def test_checkerboard_pipeline_gives_the_focal_length_for_the_capture(tmp_path, 
     rep = json.loads((tmp_path / "lens" / "lens.json").read_text())
     assert rep["fx_px"] == pytest.approx(720.0, rel=0.01) and rep["views_used"] == 8
     assert (rep["width"], rep["height"]) == (W, H)  # io.video's lens checks the video's size against it
+    import cv2
+
+    picture = cv2.imread(str(tmp_path / "lens" / "lens.png"))  # the board as filmed | with the lens taken out
+    assert picture is not None and picture.shape == (H, 2 * W, 3)
+    assert rep["bend_px_at_corners"] < 0.5  # a pinhole lens (measured 0.2 px)
 
 
 def test_checkerboard_wrong_board_size_is_explained(tmp_path):
@@ -256,7 +261,7 @@ class DistortingLens:
         return cv2.remap(img, self.map_x, self.map_y, cv2.INTER_LINEAR, borderValue=128)
 
 
-#: An action camera's barrel distortion at the sample's focal length: 31 px at the image's corners
+#: An action camera's barrel distortion at the sample's focal length: 37 px at the image's corners
 WIDE = DistortingLens(np.array([[700.0, 0, 319.5], [0, 700.0, 239.5], [0, 0, 1]]), np.array([-0.25, 0.08, 0.0, 0.0, 0.0]))
 
 
@@ -303,7 +308,12 @@ def test_a_lens_file_takes_the_wide_lens_out_of_every_frame(wide_take):
     K = np.array([[rep["fx_px"], 0, rep["cx_px"]], [0, rep["fy_px"], rep["cy_px"]], [0, 0, 1]])
     model_err = np.linalg.norm(cv2.undistortPoints(grid, K, np.array(rep["dist"]), P=WIDE.K)
                                - cv2.undistortPoints(grid, WIDE.K, WIDE.dist, P=WIDE.K), axis=-1).max()
-    print(f"calibrated lens: k1 {rep['dist'][0]:.3f} k2 {rep['dist'][1]:.3f}, undistortion off by {model_err:.2f} px at most")
+    from tbha_graph.mocap.calibrate.checkerboard import bend_at_corners
+
+    true_bend = bend_at_corners(WIDE.K, WIDE.dist, W, H)
+    print(f"calibrated lens: k1 {rep['dist'][0]:.3f} k2 {rep['dist'][1]:.3f}, undistortion off by {model_err:.2f} px at most; "
+          f"the corners bent {rep['bend_px_at_corners']:.2f} px (truth {true_bend:.2f})")
+    assert rep["bend_px_at_corners"] == pytest.approx(true_bend, abs=4.5)  # measured 34.1 against 37.1 (the extreme corners, beyond the boards)
     assert model_err < 1.5  # the bent board photos give the lens back (measured 1.03 px, at the corners)
     straight = run_node(VIDEO_NODE, {"path": path, "lens": lens})["video"]
     bent = run_node(VIDEO_NODE, {"path": path})["video"]

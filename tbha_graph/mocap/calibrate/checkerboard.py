@@ -5,7 +5,12 @@ video file (or every image of a folder, in name order); ``cv2.calibrateCamera`` 
 distortion. The output camera's extrinsics are those of the **first view with a detected board**: world
 frame = that board, origin at its first inner corner, x along the rows of corners, y along the columns,
 z into the board (OpenCV's object-point convention), metres. Feed K (and dist) to ``calibrate.pnp`` to place
-the camera in the actor's world.
+the camera in the actor's world, or the report (``lens.json``) to ``io.video``'s ``lens``.
+
+The report holds how far the lens moves the image's corners (``bend_px_at_corners``: above a pixel or so a take needs
+the whole lens file, not just its focal length), and ``picture`` shows the view whose board reaches farthest from the
+image's centre as filmed and with the lens taken out: each row of corners against the straight line through its
+ends (:func:`draw_rows`).
 """
 from __future__ import annotations
 
@@ -15,10 +20,11 @@ from typing import Iterator, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from ...core.atomic import atomic_write_bytes
 from ...core.errors import NodeError
 from ...core.node import InputPath, node
 from ..camera import Camera
-from ..ports import CAMERA, REPORT
+from ..ports import CAMERA, IMAGE, REPORT
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 
@@ -87,9 +93,39 @@ def find_corners(grey: np.ndarray, columns: int, rows: int) -> np.ndarray | None
     return cv2.cornerSubPix(grey, corners, (5, 5), (-1, -1), criteria)
 
 
-@node("calibrate.checkerboard", version=2, inputs={}, outputs={"camera": CAMERA, "report": REPORT}, params=CheckerboardParams)
+def bend_at_corners(K: np.ndarray, dist: np.ndarray, width: int, height: int) -> float:
+    """How far, pixels, the lens (``K`` ``(3, 3)``, OpenCV ``dist``) moves the image's four corners from where an
+    ideal camera with the same ``K`` would put them (the largest of the four)."""
+    import cv2
+
+    corners = np.array([[0, 0], [width - 1, 0], [0, height - 1], [width - 1, height - 1]], np.float64).reshape(-1, 1, 2)
+    ideal = cv2.undistortPoints(corners, K, dist, P=K)
+    return float(np.linalg.norm(ideal - corners, axis=-1).max())
+
+
+def draw_rows(grey: np.ndarray, corners: np.ndarray, columns: int, rows: int, caption: str) -> np.ndarray:
+    """BGR ``(h, w, 3)`` image of ``grey`` with each row of ``corners`` ``(columns * rows, 2)`` pixels (OpenCV's
+    order) drawn in green over the straight line through its two ends in red: a lens that bends lines shows as rows
+    sagging off their red lines."""
+    import cv2
+
+    img = cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)
+    for row in corners.reshape(rows, columns, 2):
+        a, b = row[0], row[-1]
+        d = (b - a) / max(np.linalg.norm(b - a), 1e-9)
+        reach = max(img.shape)  # the line drawn across the whole image
+        cv2.line(img, tuple(np.round(a - reach * d).astype(int)), tuple(np.round(b + reach * d).astype(int)), (40, 40, 230), 1, cv2.LINE_AA)
+        cv2.polylines(img, [np.round(row).astype(np.int32)], False, (40, 200, 40), 2, cv2.LINE_AA)
+    cv2.rectangle(img, (0, img.shape[0] - 26), (img.shape[1], img.shape[0]), (255, 255, 255), cv2.FILLED)
+    cv2.putText(img, caption, (6, img.shape[0] - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (30, 30, 30), 1, cv2.LINE_AA)
+    return img
+
+
+@node("calibrate.checkerboard", version=2, inputs={},
+      outputs={"camera": CAMERA, "report": REPORT, "picture": IMAGE}, params=CheckerboardParams)
 def checkerboard(ctx):
-    """Intrinsics K and distortion from a checkerboard clip (OpenCV), extrinsics of the first view."""
+    """Intrinsics K and distortion from a checkerboard clip (OpenCV), extrinsics of the first view; ``picture``
+    (PNG): the view whose board reaches farthest out, as filmed and with the lens taken out."""
     import cv2
 
     p: CheckerboardParams = ctx.params
@@ -97,6 +133,7 @@ def checkerboard(ctx):
     views: list[tuple[int, np.ndarray]] = []
     size = None
     n_seen = 0
+    widest = None  # (reach px from the centre, index, grey image, corners) of the view reaching farthest out
     for i, grey in ctx.progress(iter_images(Path(p.path), p.step), desc="checkerboard"):
         n_seen += 1
         if size is None:
@@ -106,6 +143,9 @@ def checkerboard(ctx):
         corners = find_corners(grey, p.columns, p.rows)
         if corners is not None:
             views.append((i, corners))
+            reach = float(np.linalg.norm(corners.reshape(-1, 2) - np.array(size) / 2.0, axis=-1).max())
+            if widest is None or reach > widest[0]:  # only that image is kept (a long clip's views are not held)
+                widest = (reach, i, grey, corners.reshape(-1, 2))
     if len(views) < 3:
         raise NodeError(
             f"{p.path}: the {p.columns}x{p.rows} board was found in {len(views)} of {n_seen} images; at least 3 are needed",
@@ -123,6 +163,16 @@ def checkerboard(ctx):
         [obj] * len(views), [c for _, c in views], size, None, None, flags=flags
     )
     dist5 = np.concatenate([np.ravel(dist), np.zeros(5)])[:5]
+    bend = bend_at_corners(K, dist5, *size)
+    _, index, grey, corners = widest
+    flat = cv2.undistortPoints(corners.reshape(-1, 1, 2), K, dist5, P=K).reshape(-1, 2)
+    pair = np.hstack([
+        draw_rows(grey, corners, p.columns, p.rows, f"image {index} as filmed: rows (green) against straight lines (red)"),
+        draw_rows(cv2.undistort(grey, K, dist5), flat, p.columns, p.rows,
+                  f"lens taken out: f {K[0, 0]:.0f} px, k1 {dist5[0]:.3f} k2 {dist5[1]:.3f}, corners bent {bend:.1f} px, rms {rms:.2f} px"),
+    ])
+    _, png = cv2.imencode(".png", pair)
+    picture = atomic_write_bytes(ctx.output_path("lens.png"), png.tobytes())
     cam = Camera(K=K, R=cv2.Rodrigues(rvecs[0])[0], t=np.ravel(tvecs[0]), width=size[0], height=size[1], dist=dist5)
     return {"camera": cam.to_model(), "report": {
         "method": "checkerboard",
@@ -132,5 +182,6 @@ def checkerboard(ctx):
         "first_view_index": int(views[0][0]),
         "fx_px": float(K[0, 0]), "fy_px": float(K[1, 1]), "cx_px": float(K[0, 2]), "cy_px": float(K[1, 2]),
         "width": int(size[0]), "height": int(size[1]),  # the frame size it holds for (io.video's lens checks it)
+        "bend_px_at_corners": round(bend, 2),  # how far the lens moves the image's corners
         "dist": dist5.tolist(),
-    }}
+    }, "picture": picture}
