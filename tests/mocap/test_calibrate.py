@@ -356,7 +356,7 @@ def test_a_lens_file_of_another_camera_or_no_lens_file_is_named(wide_take, tmp_p
     path, lens, rep, _ = wide_take
     half = run_node(VIDEO_NODE, {"path": path, "lens": lens, "scale": 0.5})["video"]  # downscaled frames: the lens too
     assert half.lens.focal_px == pytest.approx(0.25 * (rep["fx_px"] + rep["fy_px"]))
-    assert half.lens.K[0][2] == pytest.approx(0.5 * rep["cx_px"])
+    assert half.lens.K[0][2] == pytest.approx(0.5 * (rep["cx_px"] + 0.5) - 0.5)  # pixel centres kept
     other = tmp_path / "phone_lens.json"
     other.write_text(json.dumps({**rep, "width": 1920, "height": 1080}))
     with pytest.raises(NodeError, match=r"phone_lens\.json: calibrated on 1920x1080 frames, the video's are 640x480"):

@@ -23,8 +23,8 @@ _HINT = "give the lens.json that pipelines/checkerboard.yaml wrote for this came
 
 def read_lens_file(path: str | Path, width: int, height: int, scaled: tuple[int, int] | None = None) -> LensUndistortion:
     """The calibration in ``path`` for a video whose file frames are ``width`` x ``height`` pixels, read downscaled
-    to ``scaled`` ``(w, h)`` pixels if given (the intrinsics scaled with the frames). Raises :class:`NodeError` naming the file when it is not
-    such a file or was calibrated at another frame size."""
+    to ``scaled`` ``(w, h)`` pixels if given (the intrinsics scaled with the frames, pixel centres kept). Raises
+    :class:`NodeError` naming the file when it is not such a file or was calibrated at another frame size."""
     path = Path(path)
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
@@ -48,7 +48,7 @@ def read_lens_file(path: str | Path, width: int, height: int, scaled: tuple[int,
         raise NodeError(f"lens file {path}: calibrated on {w0}x{h0} frames, the video's are {width}x{height}",
                         hint="film the checkerboard with the same camera, resolution and zoom as the take, and calibrate again")
     sx, sy = (scaled[0] / width, scaled[1] / height) if scaled is not None else (1.0, 1.0)
-    K = [[fx * sx, 0.0, cx * sx], [0.0, fy * sy, cy * sy], [0.0, 0.0, 1.0]]
+    K = [[fx * sx, 0.0, (cx + 0.5) * sx - 0.5], [0.0, fy * sy, (cy + 0.5) * sy - 0.5], [0.0, 0.0, 1.0]]
     return LensUndistortion(K=K, dist=(dist + [0.0] * 5)[:5], focal_px=0.5 * (fx * sx + fy * sy), source=str(path))
 
 
@@ -71,4 +71,3 @@ def undistort(frame: np.ndarray, lens: LensUndistortion) -> np.ndarray:
     h, w = frame.shape[:2]
     m1, m2 = _maps(tuple(map(tuple, lens.K)), tuple(lens.dist), float(lens.focal_px), w, h)
     return cv2.remap(frame, m1, m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-

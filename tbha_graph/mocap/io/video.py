@@ -4,8 +4,9 @@ The node only checks the file and describes it (path, content hash, frame range,
 downscaling); it never loads the video. Consumers stream frames with :func:`iter_frames`, which
 decodes with ``cv2.VideoCapture`` one frame at a time.
 
-Frames are BGR ``uint8`` arrays of shape ``(height, width, 3)`` (size after ``scale``), pixels from
-the top-left corner. Frame indices are those of the file (``start`` .. ``stop - 1``).
+Frames are BGR ``uint8`` arrays of shape ``(height, width, 3)`` (size after ``scale``, then the lens's
+distortion taken out when the ``lens`` param names a lens file: :mod:`.lens_file`), pixels from the top-left
+corner. Frame indices are those of the file (``start`` .. ``stop - 1``).
 """
 from __future__ import annotations
 
