@@ -46,6 +46,12 @@ HEADLINE = ("tracked_pct", "reprojection_px_median", "fit_px_median", "mpjpe_mm"
             "focal_px", "camera_height_m", "camera_distance_m", "camera_tilt_deg")
 
 
+def focal_origin(source: str) -> str | None:
+    """The summary's short tag for ``metrics.json``'s ``focal_source``: where the focal length came from (``None``:
+    the take alone, whose span the summary shows instead)."""
+    return {"given": "given", "room": "room lines", "lens": "lens file"}.get(source.split(" ")[0])
+
+
 def print_summary(run, out_dir: Path, verbose: bool = False) -> None:
     """At most 15 lines (more with ``verbose``): what ran, the verdict and its reasons, the headline
     figures of a ``metrics.json`` output, the warnings, where the outputs are."""
@@ -80,8 +86,9 @@ def print_summary(run, out_dir: Path, verbose: bool = False) -> None:
             source = str(metrics.get("focal_source", ""))
             if "focal_px" in text and isinstance(lo, (int, float)) and isinstance(hi, (int, float)) and hi > lo:
                 text["focal_px"] += f" (fits {lo:.0f}-{hi:.0f})"  # how open the take leaves it
-            elif "focal_px" in text and source:  # where it came from: given, or the room's lines
-                text["focal_px"] += " (given)" if source == "given" else " (room lines)" if source.startswith("room") else ""
+            elif "focal_px" in text and source:  # where it came from: given, a lens file, or the room's lines
+                origin = focal_origin(source)
+                text["focal_px"] += f" ({origin})" if origin else ""
             for i in range(0, len(shown), 3):  # three a line: the summary stays short with warnings below
                 print("  " + "   ".join(f"{k} {text[k]}" for k in shown[i : i + 3]))
     if warnings:

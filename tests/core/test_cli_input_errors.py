@@ -77,3 +77,14 @@ def test_deeply_nested_set_value_is_a_clear_error(write, registry, capsys):
     p = write("c.yaml", CHAIN)
     assert graph_cli.main(["validate", str(p), "--plugin", "testnodes", "--set", "src.n=" + "[" * 3000 + "]" * 3000]) == 2
     assert "nested too deeply" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("source, tag", [
+    ("given", "given"),
+    ("room lines 698 px ± 0.7 %, refined by the take", "room lines"),
+    ("lens file 700 px ± 0.5 %, refined by the take", "lens file"),
+    ("estimated from the take", None),
+])
+def test_the_summary_says_where_the_focal_length_came_from(source, tag):
+    """metrics.json's ``focal_source`` as ``reconstruct.solve_take`` writes it -> the summary's tag after focal_px."""
+    assert run_cli.focal_origin(source) == tag
