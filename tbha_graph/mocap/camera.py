@@ -17,6 +17,12 @@ import numpy as np
 from pydantic import BaseModel, Field
 
 
+def centred_intrinsics(focal_px: float, width: int, height: int) -> np.ndarray:
+    """``(3, 3)`` intrinsics of an ideal camera: focal length ``focal_px`` pixels, square pixels, the principal point
+    at the image centre ``((width - 1) / 2, (height - 1) / 2)``."""
+    return np.array([[focal_px, 0.0, (width - 1) / 2.0], [0.0, focal_px, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
+
+
 class CameraModel(BaseModel):
     """A camera as data (what flows between nodes and is written to files): see :class:`Camera`."""
 
@@ -71,7 +77,7 @@ class Camera:
         y = np.cross(z, x)
         R = np.stack([x, y, z])
         t = -R @ eye
-        K = np.array([[focal_px, 0.0, (width - 1) / 2.0], [0.0, focal_px, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
+        K = centred_intrinsics(focal_px, width, height)
         return cls(K=K, R=R, t=t, width=int(width), height=int(height))
 
     # --- geometry -----------------------------------------------------------------------------

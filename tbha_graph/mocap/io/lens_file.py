@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 
 from ...core.errors import NodeError
+from ..camera import centred_intrinsics
 from ..ports import LensUndistortion
 
 _HINT = "give the lens.json that pipelines/checkerboard.yaml wrote for this camera at the video's resolution and zoom"
@@ -52,21 +53,14 @@ def read_lens_file(path: str | Path, width: int, height: int, scaled: tuple[int,
     return LensUndistortion(K=K, dist=(dist + [0.0] * 5)[:5], focal_px=0.5 * (fx * sx + fy * sy), source=str(path))
 
 
-def pinhole_matrix(lens: LensUndistortion, width: int, height: int) -> np.ndarray:
-    """``(3, 3)`` intrinsics of the frames as read: ``lens.focal_px``, principal point at the image centre."""
-    f = lens.focal_px
-    return np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
-
-
 @lru_cache(maxsize=4)
 def _maps(K: tuple, dist: tuple, focal: float, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
-    lens = LensUndistortion(K=[list(r) for r in K], dist=list(dist), focal_px=focal, source="")
-    return cv2.initUndistortRectifyMap(np.array(K), np.array(dist), None, pinhole_matrix(lens, width, height),
+    return cv2.initUndistortRectifyMap(np.array(K), np.array(dist), None, centred_intrinsics(focal, width, height),
                                        (width, height), cv2.CV_16SC2)
 
 
 def undistort(frame: np.ndarray, lens: LensUndistortion) -> np.ndarray:
-    """``frame`` ``(h, w, 3)`` as the pinhole camera of :func:`pinhole_matrix` sees it (bilinear; pixels whose ray
+    """``frame`` ``(h, w, 3)`` as the ideal camera of ``lens.focal_px`` (:func:`..camera.centred_intrinsics`) sees it (bilinear; pixels whose ray
     falls outside the file's frame black). The remap tables are made once per lens and size."""
     h, w = frame.shape[:2]
     m1, m2 = _maps(tuple(map(tuple, lens.K)), tuple(lens.dist), float(lens.focal_px), w, h)
