@@ -1,21 +1,34 @@
 """The ``video`` port: a reference to (a frame range of) a video file, streamed by its consumers."""
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict, Field
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 
 class LensUndistortion(BaseModel):
     """A lens calibration (``pipelines/checkerboard.yaml``'s ``lens.json``) applied to every frame as it is read:
     the frame is remapped from the calibrated camera ``K`` with ``dist`` to an ideal pinhole camera of focal length
     ``focal_px`` with square pixels and its principal point at the image centre ``((w - 1) / 2, (h - 1) / 2)``, the
-    camera every later stage assumes. ``K`` refers to the clip's frames (after ``scale``)."""
+    camera every later stage assumes. ``K`` refers to the clip's frames (after ``scale``). ``model`` is OpenCV's
+    lens model the file was calibrated with: ``pinhole`` (``dist`` k1 k2 p1 p2 k3, ``cv2.undistort``'s) or
+    ``fisheye`` (``dist`` k1 k2 k3 k4 of the angle, ``cv2.fisheye``'s: an action camera's widest modes)."""
 
     model_config = ConfigDict(extra="forbid")
 
     K: list[list[float]] = Field(description="3x3 intrinsics of the calibrated camera at the clip's frame size, pixels")
-    dist: list[float] = Field(min_length=5, max_length=5, description="OpenCV distortion k1 k2 p1 p2 k3")
+    model: Literal["pinhole", "fisheye"] = Field("pinhole", description="OpenCV lens model of K and dist")
+    dist: list[float] = Field(min_length=4, max_length=5, description="OpenCV distortion: k1 k2 p1 p2 k3 (pinhole) "
+                              "or k1 k2 k3 k4 (fisheye)")
     focal_px: float = Field(gt=0, description="focal length of the frames as read (the mean of K's fx and fy), pixels")
     source: str = Field(description="the lens file it came from")
+
+    @model_validator(mode="after")
+    def _terms_fit_the_model(self) -> "LensUndistortion":
+        need = 4 if self.model == "fisheye" else 5
+        if len(self.dist) != need:
+            raise ValueError(f"a {self.model} lens has {need} distortion terms, got {len(self.dist)}")
+        return self
 
 
 class VideoClip(BaseModel):

@@ -5,6 +5,11 @@ A wide-angle or action camera bends straight lines; every stage after decoding a
 :func:`undistort` remaps a frame to the pinhole camera it describes (its focal length the mean of the calibrated
 ``fx`` and ``fy``, square pixels, the principal point at the image centre ``((w - 1) / 2, (h - 1) / 2)``). Pixels
 from the top-left; frames BGR ``uint8`` ``(h, w, 3)``.
+
+Two of OpenCV's lens models (lens.json's ``model``; files without it are ``pinhole``): ``pinhole``, the radial and
+tangential terms k1 k2 p1 p2 k3 of ``cv2.undistort``, for ordinary and wide-angle lenses; ``fisheye``, k1..k4 of the
+angle off the axis (``cv2.fisheye``), for an action camera's widest modes. :func:`ideal_points` and
+:func:`straighten_image` are the one place that tells them apart.
 """
 from __future__ import annotations
 
@@ -42,26 +47,63 @@ def read_lens_file(path: str | Path, width: int, height: int, scaled: tuple[int,
         w0, h0 = int(data["width"]), int(data["height"])
     except (TypeError, ValueError) as exc:
         raise NodeError(f"lens file {path}: a value is not a number ({exc})", hint=_HINT) from exc
-    if len(dist) > 5 or any(dist[5:]) or not all(np.isfinite([fx, fy, cx, cy, *dist])) or min(fx, fy) <= 0:
-        raise NodeError(f"lens file {path}: expects positive focal lengths and at most 5 finite distortion terms "
-                        f"(k1 k2 p1 p2 k3), has fx {fx}, fy {fy}, dist {dist}", hint=_HINT)
+    model = data.get("model", "pinhole")
+    if model not in LENS_MODELS:
+        raise NodeError(f"lens file {path}: model {model!r} is not one of {', '.join(LENS_MODELS)}", hint=_HINT)
+    terms = LENS_MODELS[model]
+    if len(dist) > terms[0] or any(dist[terms[0]:]) or not all(np.isfinite([fx, fy, cx, cy, *dist])) or min(fx, fy) <= 0:
+        raise NodeError(f"lens file {path}: a {model} lens expects positive focal lengths and at most {terms[0]} finite "
+                        f"distortion terms ({terms[1]}), has fx {fx}, fy {fy}, dist {dist}", hint=_HINT)
     if (w0, h0) != (width, height):
         raise NodeError(f"lens file {path}: calibrated on {w0}x{h0} frames, the video's are {width}x{height}",
                         hint="film the checkerboard with the same camera, resolution and zoom as the take, and calibrate again")
     sx, sy = (scaled[0] / width, scaled[1] / height) if scaled is not None else (1.0, 1.0)
     K = [[fx * sx, 0.0, (cx + 0.5) * sx - 0.5], [0.0, fy * sy, (cy + 0.5) * sy - 0.5], [0.0, 0.0, 1.0]]
-    return LensUndistortion(K=K, dist=(dist + [0.0] * 5)[:5], focal_px=0.5 * (fx * sx + fy * sy), source=str(path))
+    return LensUndistortion(K=K, model=model, dist=(dist + [0.0] * terms[0])[:terms[0]],
+                            focal_px=0.5 * (fx * sx + fy * sy), source=str(path))
+
+
+#: lens.json's ``model`` -> (number of distortion terms, their names)
+LENS_MODELS = {"pinhole": (5, "k1 k2 p1 p2 k3"), "fisheye": (4, "k1 k2 k3 k4")}
+
+
+def ideal_points(points: np.ndarray, K: np.ndarray, dist: np.ndarray, model: str, P: np.ndarray) -> np.ndarray:
+    """Pixels ``(n, 2)`` filmed through the lens (``K`` ``(3, 3)``, ``dist``, ``model`` as in lens.json) -> where
+    the pinhole camera ``P`` ``(3, 3)`` puts the same rays ``(n, 2)``. Rays 90 degrees or more off the axis (a
+    fisheye's rim) have no pinhole image: NaN."""
+    pts = np.asarray(points, np.float64).reshape(-1, 1, 2)
+    K, dist, P = (np.asarray(a, np.float64) for a in (K, dist, P))
+    if model == "fisheye":
+        out = cv2.fisheye.undistortPoints(pts, K, dist, P=P).reshape(-1, 2)
+        # cv2.fisheye folds rays past 90 degrees back in front: the distorted radius says which those are
+        theta_d = np.linalg.norm(cv2.undistortPoints(pts, K, None).reshape(-1, 2), axis=-1)
+        k = np.concatenate([dist.ravel(), np.zeros(4)])[:4]
+        theta = np.linspace(0, np.pi / 2, 512)
+        theta_d_rim = np.max(theta * (1 + k[0] * theta**2 + k[1] * theta**4 + k[2] * theta**6 + k[3] * theta**8))
+        out[theta_d >= theta_d_rim] = np.nan
+        return out
+    return cv2.undistortPoints(pts, K, dist, P=P).reshape(-1, 2)
+
+
+def straighten_image(image: np.ndarray, K: np.ndarray, dist: np.ndarray, model: str, P: np.ndarray) -> np.ndarray:
+    """``image`` ``(h, w[, 3])`` filmed through the lens, as the pinhole camera ``P`` ``(3, 3)`` of the same size
+    sees it (bilinear; pixels whose ray falls outside the filmed frame black)."""
+    h, w = image.shape[:2]
+    m1, m2 = _maps(tuple(map(tuple, np.asarray(K, float))), tuple(np.ravel(dist).astype(float)), model,
+                   tuple(map(tuple, np.asarray(P, float))), w, h)
+    return cv2.remap(image, m1, m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
 
 
 @lru_cache(maxsize=4)
-def _maps(K: tuple, dist: tuple, focal: float, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
-    return cv2.initUndistortRectifyMap(np.array(K), np.array(dist), None, centred_intrinsics(focal, width, height),
-                                       (width, height), cv2.CV_16SC2)
+def _maps(K: tuple, dist: tuple, model: str, P: tuple, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    K, dist, P = np.array(K), np.array(dist), np.array(P)
+    if model == "fisheye":
+        return cv2.fisheye.initUndistortRectifyMap(K, dist, np.eye(3), P, (width, height), cv2.CV_16SC2)
+    return cv2.initUndistortRectifyMap(K, dist, None, P, (width, height), cv2.CV_16SC2)
 
 
 def undistort(frame: np.ndarray, lens: LensUndistortion) -> np.ndarray:
     """``frame`` ``(h, w, 3)`` as the ideal camera of ``lens.focal_px`` (:func:`..camera.centred_intrinsics`) sees it (bilinear; pixels whose ray
     falls outside the file's frame black). The remap tables are made once per lens and size."""
     h, w = frame.shape[:2]
-    m1, m2 = _maps(tuple(map(tuple, lens.K)), tuple(lens.dist), float(lens.focal_px), w, h)
-    return cv2.remap(frame, m1, m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+    return straighten_image(frame, np.array(lens.K), np.array(lens.dist), lens.model, centred_intrinsics(lens.focal_px, w, h))

@@ -227,7 +227,7 @@ def iter_frames_at(clip: VideoClip, indices) -> Iterator[tuple[int, np.ndarray]]
 
 @node(
     "io.video",
-    version=3,
+    version=4,
     inputs={"file": optional(VIDEO_FILE, "a video produced upstream (instead of the path param)")},
     outputs={"video": VIDEO},
     params=VideoParams,
