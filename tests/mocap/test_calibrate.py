@@ -174,12 +174,9 @@ def test_known_errors_name_file_and_keys(tmp_path):
         run_node(known, {"path": path})
 
 
-def _render_board_views(folder, K, cols, rows, square, n_views, seed=0, lens=None):
-    """Synthetic checkerboard photos: a board texture warped by the homography K [r1 r2 t]; ``lens`` (optional, a
-    :class:`DistortingLens`) bends each photo as that lens would."""
-    import cv2
-    from scipy.spatial.transform import Rotation
-
+def _board_texture(cols, rows, square):
+    """A checkerboard texture (grey uint8) with ``cols`` x ``rows`` inner corners, ``S`` (3, 3) taking board metres
+    to its pixels, and the board's centre (3,) metres."""
     px = 24  # texture pixels per square
     tex = np.full(((rows + 3) * px, (cols + 3) * px), 255, np.uint8)
     for r in range(rows + 1):
@@ -188,7 +185,16 @@ def _render_board_views(folder, K, cols, rows, square, n_views, seed=0, lens=Non
                 tex[(r + 1) * px:(r + 2) * px, (c + 1) * px:(c + 2) * px] = 0
     # board metres -> texture pixels: inner corner (0, 0) sits at texture ((2 px) - 0.5, (2 px) - 0.5)
     S = np.array([[px / square, 0, 2 * px - 0.5], [0, px / square, 2 * px - 0.5], [0, 0, 1]])
-    centre = np.array([(cols - 1) * square / 2, (rows - 1) * square / 2, 0.0])
+    return tex, S, np.array([(cols - 1) * square / 2, (rows - 1) * square / 2, 0.0])
+
+
+def _render_board_views(folder, K, cols, rows, square, n_views, seed=0, lens=None):
+    """Synthetic checkerboard photos: a board texture warped by the homography K [r1 r2 t]; ``lens`` (optional, a
+    :class:`DistortingLens`) bends each photo as that lens would."""
+    import cv2
+    from scipy.spatial.transform import Rotation
+
+    tex, S, centre = _board_texture(cols, rows, square)
     rng = np.random.default_rng(seed)
     for i in range(n_views):
         R = Rotation.from_euler("xyz", rng.uniform(-35, 35, 3), degrees=True).as_matrix()
@@ -269,10 +275,6 @@ WIDE = DistortingLens(np.array([[700.0, 0, 319.5], [0, 700.0, 239.5], [0, 0, 1]]
 def wide_take(tmp_path_factory):
     """The sample's first 40 frames as the wide lens films them (MJPG), and the lens.json that
     ``calibrate.checkerboard`` writes for that lens from 12 bent board photos."""
-    import cv2
-
-    from pathlib import Path
-
     from tbha_graph.core.atomic import atomic_write_text
 
     folder = tmp_path_factory.mktemp("wide")
@@ -281,16 +283,27 @@ def wide_take(tmp_path_factory):
     rep = run_node(checkerboard, {"path": folder / "board", "columns": 9, "rows": 6, "square_size": 0.03})["report"]
     lens = folder / "lens.json"
     atomic_write_text(lens, json.dumps(rep))
+    originals = _bent_sample(folder / "wide.avi", WIDE, 40)
+    return folder / "wide.avi", lens, rep, originals
+
+
+def _bent_sample(path, lens, n: int) -> np.ndarray:
+    """The sample's first ``n`` frames bent by ``lens`` (its ``bend``) written to ``path`` as MJPG; returns the
+    unbent frames ``(n, H, W, 3)``."""
+    import cv2
+
+    from pathlib import Path
+
     cap = cv2.VideoCapture(str(Path(__file__).resolve().parents[2] / "data" / "sample" / "sample.mp4"))
-    out = cv2.VideoWriter(str(folder / "wide.avi"), cv2.VideoWriter_fourcc(*"MJPG"), 30, (W, H))
+    out = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 30, (W, H))
     originals = []
-    for _ in range(40):
+    for _ in range(n):
         ok, frame = cap.read()
         originals.append(frame)
-        out.write(WIDE.bend(frame))
+        out.write(lens.bend(frame))
     out.release()
     cap.release()
-    return folder / "wide.avi", lens, rep, np.array(originals)
+    return np.array(originals)
 
 
 def test_a_lens_file_takes_the_wide_lens_out_of_every_frame(wide_take):
@@ -388,14 +401,7 @@ def _fisheye_board_views(folder, lens: FisheyeLens, cols, rows, square, n_views,
     import cv2
     from scipy.spatial.transform import Rotation
 
-    px = 24
-    tex = np.full(((rows + 3) * px, (cols + 3) * px), 255, np.uint8)
-    for r in range(rows + 1):
-        for c in range(cols + 1):
-            if (r + c) % 2 == 0:
-                tex[(r + 1) * px:(r + 2) * px, (c + 1) * px:(c + 2) * px] = 0
-    S = np.array([[px / square, 0, 2 * px - 0.5], [0, px / square, 2 * px - 0.5], [0, 0, 1]])
-    centre = np.array([(cols - 1) * square / 2, (rows - 1) * square / 2, 0.0])
+    tex, S, centre = _board_texture(cols, rows, square)
     rays = np.concatenate([lens.normalised, np.ones((H, W, 1))], -1)
     rng = np.random.default_rng(seed)
     for i in range(n_views):
@@ -480,20 +486,9 @@ def test_a_fisheye_lens_file_straightens_the_take(tmp_path):
     """A take filmed through a fisheye lens, read with its lens.json (``"model": "fisheye"``), gives the pinhole
     camera's frames. Measured on 4 of the sample's frames bent by it (46 px at the corners): edges away from the
     centre 0.08 px from the pinhole frames, 6.5 px without the file."""
-    import cv2
-
     from tbha_graph.core.atomic import atomic_write_text
-    from pathlib import Path
 
-    cap = cv2.VideoCapture(str(Path(__file__).resolve().parents[2] / "data" / "sample" / "sample.mp4"))
-    out = cv2.VideoWriter(str(tmp_path / "fish.avi"), cv2.VideoWriter_fourcc(*"MJPG"), 30, (W, H))
-    originals = []
-    for _ in range(4):
-        ok, frame = cap.read()
-        originals.append(frame)
-        out.write(FISHEYE_700.bend(frame))
-    out.release()
-    cap.release()
+    originals = _bent_sample(tmp_path / "fish.avi", FISHEYE_700, 4)
     lens = tmp_path / "lens.json"
     atomic_write_text(lens, json.dumps(FISHEYE_700.lens_json()))
     straight = run_node(VIDEO_NODE, {"path": tmp_path / "fish.avi", "lens": lens})["video"]
