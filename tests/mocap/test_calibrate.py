@@ -353,6 +353,27 @@ def test_a_lens_file_gives_the_solver_its_focal_length(wide_take):
     assert straight.up_cam is not None  # the room's lines, straight again, agree with it: the floor's tilt too
 
 
+def test_a_lens_file_of_another_zoom_is_questioned_by_the_rooms_lines(wide_take, tmp_path):
+    """A lens.json whose focal length is 20 % short (calibrated at another zoom): the room's lines in the frames it
+    straightens give 787 px ± 3.4 % against its 560 (measured), and the run warns; the right file (lines 701 px
+    against 700) does not."""
+    from tbha_graph.core.node import Context
+    from tbha_graph.mocap.calibrate.vanishing_points import vanishing_points
+
+    path, lens, rep, _ = wide_take
+    short = tmp_path / "zoomed_lens.json"
+    short.write_text(json.dumps({**rep, "fx_px": 0.8 * rep["fx_px"], "fy_px": 0.8 * rep["fy_px"]}))
+    warned = {}
+    for name, file in (("right", lens), ("short", short)):
+        ctx = Context("lens", vanishing_points.params.model_validate({}))
+        out = vanishing_points.fn(ctx, run_node(VIDEO_NODE, {"path": path, "lens": file})["video"])
+        print(f"{name} lens file: the room's lines {out['report']['focal_px']} px ± {out['report']['focal_sd_pct']} %")
+        warned[name] = ctx.warnings
+    assert warned["right"] == []
+    (warning,) = warned["short"]
+    assert "lens file zoomed_lens.json 56" in warning and "another camera or zoom" in warning
+
+
 def test_a_lens_file_of_another_camera_or_no_lens_file_is_named(wide_take, tmp_path):
     path, lens, rep, _ = wide_take
     half = run_node(VIDEO_NODE, {"path": path, "lens": lens, "scale": 0.5})["video"]  # downscaled frames: the lens too

@@ -32,7 +32,8 @@ happen to pass the tests give a wrong focal length, and the bootstrap cannot see
 
 A video read with a lens file (``io.video``'s ``lens``: its distortion removed, its focal length known) gives the
 file's focal length instead (sd :data:`LENS_FILE_SD_PCT`), and the floor's tilt from the lines when their own focal
-length agrees with it.
+length agrees with it; when the lines say something else with confidence (:data:`LENS_FILE_DISAGREE`), a warning
+that the file may be another camera's or zoom's.
 """
 from __future__ import annotations
 
@@ -356,9 +357,12 @@ LENS_FILE_SD_PCT = 0.5
 #: With a lens file, the room's floor tilt is used when the room's own focal length agrees with the file's within this
 #: fraction (the tilt is found with it)
 LENS_FILE_AGREE = 0.03
+#: the room's lines (known to ``max_sd_pct`` or better) and a lens file further apart than this, and 3 of the
+#: lines' sd: a warning (a lens file of another zoom, its focal length 20 % short: the lines 40 %, 12 sd, apart)
+LENS_FILE_DISAGREE = 0.15
 
 
-@node("calibrate.vanishing_points", version=3, inputs={"video": VIDEO},
+@node("calibrate.vanishing_points", version=4, inputs={"video": VIDEO},
       outputs={"lens": LENS, "report": REPORT, "picture": IMAGE}, params=VanishingParams)
 def vanishing_points(ctx, video) -> dict:
     """The focal length from the room's straight lines (module docstring): ``lens`` for ``reconstruct.solve_take``
@@ -377,6 +381,11 @@ def vanishing_points(ctx, video) -> dict:
                             f"{calibrated.focal_px:.0f} px" + (", the floor's tilt from the room's lines" if agree else ""),
                             up_cam=found.get("up_cam") if agree else None, up_sd_deg=found.get("up_sd_deg") if agree else None)
         ctx.log(lens.source + (f" (the room's lines gave {f:.0f} px)" if f is not None else ""))
+        if f is not None and sd is not None and sd <= p.max_sd_pct and \
+                abs(f / calibrated.focal_px - 1.0) > max(LENS_FILE_DISAGREE, 3e-2 * sd):
+            ctx.warn(f"the room's lines give a focal length of {f:.0f} px ± {sd:.1f} %, the lens file "
+                     f"{Path(calibrated.source).name} {calibrated.focal_px:.0f} px (used): a lens file of another camera "
+                     "or zoom? Calibrate the lens with the camera, resolution and zoom of this take")
     elif f is not None and sd is not None and sd <= p.max_sd_pct:
         lens = LensEstimate(focal_px=f, focal_sd_pct=max(sd, 1e-3), width=video.width, height=video.height,
                             source=f"vanishing points of the room's lines: {f:.0f} px ± {sd:.1f} %"
@@ -387,7 +396,9 @@ def vanishing_points(ctx, video) -> dict:
         why = found.get("reason") or f"too uncertain: {f:.0f} px ± {sd:.0f} % (1 sd)"
         lens = LensEstimate(width=video.width, height=video.height, source=f"no focal length from the room: {why}")
         ctx.warn(f"no focal length from the room's lines ({why}); it is estimated from the take alone, which "
-                 "leaves it 10-50 % off (25 % on average over 16 renders, up to 100 %) — give focal_px if you know it")
+                 "leaves it 10-50 % off (25 % on average over 16 renders, up to 100 %) — give focal_px if you know it, "
+                 "or, for a wide-angle or action camera whose lens bends straight lines, the lens.json of "
+                 "pipelines/checkerboard.yaml as --var lens")
     _, png = cv2.imencode(".png", draw_lines(background, found, lens.source))
     picture = atomic_write_bytes(ctx.output_path("room_lines.png"), png.tobytes())
     report = {k: v for k, v in found.items() if not k.startswith("_")}
