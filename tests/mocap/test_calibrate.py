@@ -506,7 +506,8 @@ def _edge_shift(clip, originals, frames) -> float:
 def test_a_fisheye_lens_file_straightens_the_take(tmp_path):
     """A take filmed through a fisheye lens, read with its lens.json (``"model": "fisheye"``), gives the pinhole
     camera's frames. Measured on 4 of the sample's frames bent by it (46 px at the corners): edges away from the
-    centre 0.08 px from the pinhole frames, 6.5 px without the file."""
+    centre 0.08 px from the pinhole frames, 6.5 px without the file; with ``lens_view: width`` 0.07 px from the
+    pinhole frames zoomed out to the focal length that keeps the filmed width."""
     from tbha_graph.core.atomic import atomic_write_text
 
     originals = _bent_sample(tmp_path / "fish.avi", FISHEYE_700, 4)
@@ -519,6 +520,16 @@ def test_a_fisheye_lens_file_straightens_the_take(tmp_path):
     print(f"fisheye lens file: edges away from the centre {shift['straight']:.2f} px from the pinhole frames' "
           f"(without it {shift['bent']:.2f} px)")
     assert shift["straight"] < 0.12 and shift["bent"] > 4.5, shift  # measured 0.08 and 6.5 px
+    # lens_view=width: a shorter focal length keeps the filmed frame's sides in view: the pinhole frames, zoomed out
+    whole = run_node(VIDEO_NODE, {"path": tmp_path / "fish.avi", "lens": lens, "lens_view": "width"})["video"]
+    zoom = whole.lens.focal_px / 700.0
+    import cv2
+
+    zoomed = [cv2.warpAffine(f, cv2.getRotationMatrix2D((319.5, 239.5), 0.0, zoom), (W, H)) for f in originals]
+    shift["whole"] = _edge_shift(whole, zoomed, range(4))
+    print(f"lens_view=width: focal {whole.lens.focal_px:.1f} px, edges {shift['whole']:.2f} px from the zoomed-out pinhole frames'")
+    # 653.5: the side's 319.5 px is 0.4564 rad through the lens (/700), 0.4547 rad off the axis (k1 k2), tan -> 0.4889
+    assert whole.lens.focal_px == pytest.approx(653.5, abs=0.5) and shift["whole"] < 0.12  # measured 0.07 px
     wrong = tmp_path / "wrong.json"
     wrong.write_text(json.dumps({**FISHEYE_700.lens_json(), "dist": [0.02, -0.01, 0.0, 0.0, 0.1]}))
     with pytest.raises(NodeError, match=r"wrong\.json: a fisheye lens expects .* at most 4 finite distortion terms"):

@@ -20,7 +20,8 @@ class LensUndistortion(BaseModel):
     model: Literal["pinhole", "fisheye"] = Field("pinhole", description="OpenCV lens model of K and dist")
     dist: list[float] = Field(min_length=4, max_length=5, description="OpenCV distortion: k1 k2 p1 p2 k3 (pinhole) "
                               "or k1 k2 k3 k4 (fisheye)")
-    focal_px: float = Field(gt=0, description="focal length of the frames as read (the mean of K's fx and fy), pixels")
+    focal_px: float = Field(gt=0, description="focal length of the frames as read, pixels (the mean of K's fx and fy, "
+                            "or shorter to keep the filmed frame's width: io.video's lens_view)")
     source: str = Field(description="the lens file it came from")
 
     @model_validator(mode="after")

@@ -27,10 +27,13 @@ from ..ports import LensUndistortion
 _HINT = "give the lens.json that pipelines/checkerboard.yaml wrote for this camera at the video's resolution and zoom"
 
 
-def read_lens_file(path: str | Path, width: int, height: int, scaled: tuple[int, int] | None = None) -> LensUndistortion:
+def read_lens_file(path: str | Path, width: int, height: int, scaled: tuple[int, int] | None = None,
+                   view: str = "calibrated") -> LensUndistortion:
     """The calibration in ``path`` for a video whose file frames are ``width`` x ``height`` pixels, read downscaled
-    to ``scaled`` ``(w, h)`` pixels if given (the intrinsics scaled with the frames, pixel centres kept). Raises
-    :class:`NodeError` naming the file when it is not such a file or was calibrated at another frame size."""
+    to ``scaled`` ``(w, h)`` pixels if given (the intrinsics scaled with the frames, pixel centres kept). ``view``:
+    the straightened frames' focal length is the calibrated one (``calibrated``), or the one that keeps the filmed
+    frame's left and right edges at mid-height in view (``width``). Raises :class:`NodeError` naming the file when
+    it is not such a file or was calibrated at another frame size."""
     path = Path(path)
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
@@ -59,8 +62,18 @@ def read_lens_file(path: str | Path, width: int, height: int, scaled: tuple[int,
                         hint="film the checkerboard with the same camera, resolution and zoom as the take, and calibrate again")
     sx, sy = (scaled[0] / width, scaled[1] / height) if scaled is not None else (1.0, 1.0)
     K = [[fx * sx, 0.0, (cx + 0.5) * sx - 0.5], [0.0, fy * sy, (cy + 0.5) * sy - 0.5], [0.0, 0.0, 1.0]]
-    return LensUndistortion(K=K, model=model, dist=(dist + [0.0] * terms[0])[:terms[0]],
-                            focal_px=0.5 * (fx * sx + fy * sy), source=str(path))
+    dist = (dist + [0.0] * terms[0])[:terms[0]]
+    focal = 0.5 * (fx * sx + fy * sy)
+    if view == "width":
+        w, h = scaled if scaled is not None else (width, height)
+        sides = ideal_points(np.array([[0.0, (h - 1) / 2.0], [w - 1.0, (h - 1) / 2.0]]), np.array(K), np.array(dist),
+                             model, np.eye(3))  # normalised image coordinates of the filmed frame's sides
+        reach = np.abs(sides[:, 0]).max()
+        if not np.isfinite(reach) or reach <= 0:
+            raise NodeError(f"lens file {path}: the frame's sides are 90 degrees or more off the axis; no pinhole "
+                            "frame holds its whole width", hint="use decode.lens_view=calibrated")
+        focal = min(focal, (w - 1) / 2.0 / float(reach))
+    return LensUndistortion(K=K, model=model, dist=dist, focal_px=focal, source=str(path))
 
 
 #: lens.json's ``model`` -> (number of distortion terms, their names)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Iterator
+from typing import Iterator, Literal
 
 import cv2
 import numpy as np
@@ -50,6 +50,11 @@ class VideoParams(BaseModel):
         None, description="lens.json of pipelines/checkerboard.yaml for this camera: its distortion is removed from "
         "every frame as it is read (a wide-angle or action camera); null: the frames as they are",
     )
+    lens_view: Literal["calibrated", "width"] = Field(
+        "calibrated", description="with a lens file: the straightened frames keep the calibrated focal length "
+        "(calibrated: a fisheye's or wide lens's sides fall outside them, lens.json's view_kept_pct), or the focal "
+        "length that keeps the filmed frame's whole width (width: the actor smaller in the middle)",
+    )
 
     @model_validator(mode="after")
     def _range(self) -> "VideoParams":
@@ -75,9 +80,10 @@ def _open(path: Path) -> cv2.VideoCapture:
 
 
 def probe_video(path: str | Path, start: int = 0, stop: int | None = None, scale: float = 1.0,
-                fps: float | None = None, lens: str | Path | None = None) -> VideoClip:
+                fps: float | None = None, lens: str | Path | None = None, lens_view: str = "calibrated") -> VideoClip:
     """Check a video file and describe the frame range ``[start, stop)`` as a :class:`VideoClip`; ``lens``: a
-    lens file (:func:`.lens_file.read_lens_file`) whose distortion :func:`iter_frames` removes from every frame.
+    lens file (:func:`.lens_file.read_lens_file`, with ``lens_view``) whose distortion :func:`iter_frames` removes
+    from every frame.
 
     Reads the first frame of the range to prove the file decodes. Raises :class:`NodeError` naming the
     file when it does not exist, is not a video, has no frames, or ``start`` lies beyond its end.
@@ -123,7 +129,7 @@ def probe_video(path: str | Path, start: int = 0, stop: int | None = None, scale
     w, h = scaled_size(width, height, scale)
     return VideoClip(
         path=str(path), sha256=file_content_hash(path), start=int(start), stop=int(stop), scale=float(scale),
-        fps=float(fps), width=w, height=h, lens=read_lens_file(lens, width, height, (w, h)) if lens is not None else None,
+        fps=float(fps), width=w, height=h, lens=read_lens_file(lens, width, height, (w, h), lens_view) if lens is not None else None,
     )
 
 
@@ -248,7 +254,7 @@ def video(ctx, file) -> dict:
             hint=f"e.g. --set {ctx.node_id}.path=my_take.mp4",
         )
     clip = probe_video(file if file is not None else p.path, start=p.start, stop=p.stop, scale=p.scale, fps=p.fps,
-                       lens=p.lens)
+                       lens=p.lens, lens_view=p.lens_view)
     times = frame_times(clip.path)
     uneven = uneven_frame_times(times, clip.start, clip.stop) if times is not None and len(times) >= clip.stop else None
     if uneven is not None:
