@@ -387,8 +387,9 @@ def test_a_lens_file_of_another_camera_or_no_lens_file_is_named(wide_take, tmp_p
     with pytest.raises(NodeError, match=r"phone_lens\.json: no fy_px, cx_px, cy_px, dist, width, height"):
         run_node(VIDEO_NODE, {"path": path, "lens": other})
     other.write_text("{not json")
-    with pytest.raises(NodeError, match=r"phone_lens\.json: cannot be read as JSON"):
+    with pytest.raises(NodeError, match=r"invalid JSON \(lens file\)") as e:
         run_node(VIDEO_NODE, {"path": path, "lens": other})
+    assert "phone_lens.json:1:2" in str(e.value)
 
 
 class FisheyeLens:
@@ -537,3 +538,43 @@ def test_a_fisheye_lens_file_straightens_the_take(tmp_path):
     wrong.write_text(json.dumps({**FISHEYE_700.lens_json(), "model": "omnidir"}))
     with pytest.raises(NodeError, match=r"wrong\.json: model 'omnidir' is not one of pinhole, fisheye"):
         run_node(VIDEO_NODE, {"path": tmp_path / "fish.avi", "lens": wrong})
+
+
+def test_lens_files_of_gyroflow_and_ros_are_read(wide_take, tmp_path):
+    """A Gyroflow lens profile (its database covers many action cameras' modes; OpenCV fisheye, scaled from another
+    resolution of the same shape) and a ROS camera_info YAML straighten the take as our lens.json does."""
+    from tbha_graph.core.atomic import atomic_write_text
+
+    originals = _bent_sample(tmp_path / "fish.avi", FISHEYE_700, 4)
+    K2 = FISHEYE_700.K * [[2, 1, 2], [1, 2, 2], [1, 1, 1]] + [[0, 0, 0.5], [0, 0, 0.5], [0, 0, 0]]  # at 1280x960
+    profile = {"name": "Test_Cam_Wide_4by3", "calib_dimension": {"w": 1280, "h": 960}, "use_opencv_fisheye": True,
+               "fisheye_params": {"RMS_error": 0.3, "camera_matrix": K2.tolist(), "distortion_coeffs": FISHEYE_700.dist.tolist()}}
+    gyro = tmp_path / "Test_Cam_Wide_4by3.json"
+    atomic_write_text(gyro, json.dumps(profile))
+    clip = run_node(VIDEO_NODE, {"path": tmp_path / "fish.avi", "lens": gyro})["video"]
+    assert clip.lens.model == "fisheye" and clip.lens.focal_px == pytest.approx(700.0)
+    assert clip.lens.K[0][2] == pytest.approx(319.5) and clip.lens.K[1][2] == pytest.approx(239.5)
+    shift = _edge_shift(clip, originals, range(4))
+    print(f"Gyroflow profile at 1280x960 on the 640x480 fisheye take: edges {shift:.2f} px from the pinhole frames'")
+    assert shift < 0.12  # as our own lens.json of the lens (measured 0.08 px)
+    wide16 = tmp_path / "wide_16by9.json"
+    wide16.write_text(json.dumps({**profile, "calib_dimension": {"w": 1920, "h": 1080}}))
+    with pytest.raises(NodeError, match=r"wide_16by9\.json: calibrated on 1920x1080 frames, the video's are 640x480"):
+        run_node(VIDEO_NODE, {"path": tmp_path / "fish.avi", "lens": wide16})
+    poly = tmp_path / "poly.json"
+    poly.write_text(json.dumps({**profile, "distortion_model": "poly3"}))
+    with pytest.raises(NodeError, match=r"poly\.json: a Gyroflow profile whose lens model \(poly3\) is not read"):
+        run_node(VIDEO_NODE, {"path": tmp_path / "fish.avi", "lens": poly})
+
+    path, lens, rep, _ = wide_take  # the barrel lens as a ROS camera_info file (plumb_bob)
+    ros = tmp_path / "camera_info.yaml"
+    K = [rep["fx_px"], 0, rep["cx_px"], 0, rep["fy_px"], rep["cy_px"], 0, 0, 1]
+    ros.write_text(f"image_width: {W}\nimage_height: {H}\ncamera_name: test\ncamera_matrix:\n  rows: 3\n  cols: 3\n"
+                   f"  data: {K}\ndistortion_model: plumb_bob\ndistortion_coefficients:\n  rows: 1\n  cols: 5\n"
+                   f"  data: {rep['dist']}\n")
+    from_ros = run_node(VIDEO_NODE, {"path": path, "lens": ros})["video"].lens
+    ours = run_node(VIDEO_NODE, {"path": path, "lens": lens})["video"].lens
+    assert from_ros.model_dump(exclude={"source"}) == ours.model_dump(exclude={"source"})
+    ros.write_text(ros.read_text().replace("plumb_bob", "rational_polynomial"))
+    with pytest.raises(NodeError, match=r"camera_info\.yaml: distortion_model 'rational_polynomial' is not read"):
+        run_node(VIDEO_NODE, {"path": path, "lens": ros})

@@ -1,4 +1,5 @@
-"""A lens calibration file (``lens.json``, written by ``pipelines/checkerboard.yaml``) applied to a video's frames.
+"""A lens calibration file (``lens.json``, written by ``pipelines/checkerboard.yaml``; or a Gyroflow lens profile or a
+ROS camera_info file) applied to a video's frames.
 
 A wide-angle or action camera bends straight lines; every stage after decoding assumes an ideal pinhole camera.
 :func:`read_lens_file` turns the file into a :class:`~..ports.LensUndistortion` for the clip's frame size, and
@@ -13,7 +14,6 @@ angle off the axis (``cv2.fisheye``), for an action camera's widest modes. :func
 """
 from __future__ import annotations
 
-import json
 from functools import lru_cache
 from pathlib import Path
 
@@ -21,6 +21,7 @@ import cv2
 import numpy as np
 
 from ...core.errors import NodeError
+from ...core.yamlfile import read_data_file
 from ..camera import centred_intrinsics
 from ..ports import LensUndistortion
 
@@ -32,34 +33,31 @@ def read_lens_file(path: str | Path, width: int, height: int, scaled: tuple[int,
     """The calibration in ``path`` for a video whose file frames are ``width`` x ``height`` pixels, read downscaled
     to ``scaled`` ``(w, h)`` pixels if given (the intrinsics scaled with the frames, pixel centres kept). ``view``:
     the straightened frames' focal length is the calibrated one (``calibrated``), or the one that keeps the filmed
-    frame's left and right edges at mid-height in view (``width``). Raises :class:`NodeError` naming the file when
-    it is not such a file or was calibrated at another frame size."""
+    frame's left and right edges at mid-height in view (``width``).
+
+    Three kinds of file are read (:func:`lens_fields`): the ``lens.json`` of ``pipelines/checkerboard.yaml``; a
+    Gyroflow lens profile (JSON with ``calib_dimension`` and ``fisheye_params``: Gyroflow's database holds profiles
+    of many action cameras' modes; one calibrated at another resolution of the same shape is scaled to the video's,
+    as Gyroflow does); a ROS ``camera_info`` YAML (``image_width``, ``camera_matrix``, ``distortion_model``
+    plumb_bob or equidistant). Raises :class:`NodeError` naming the file when it is none of these or was calibrated
+    at another frame size."""
     path = Path(path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise NodeError(f"lens file {path}: cannot be read as JSON ({exc})", hint=_HINT) from exc
-    need = ("fx_px", "fy_px", "cx_px", "cy_px", "dist", "width", "height")
-    missing = [k for k in need if not isinstance(data, dict) or k not in data]
-    if missing:
-        raise NodeError(f"lens file {path}: no {', '.join(missing)} in it (not a lens.json of pipelines/checkerboard.yaml, "
-                        "or one written before it recorded the image size)", hint=_HINT)
-    try:
-        fx, fy, cx, cy = (float(data[k]) for k in ("fx_px", "fy_px", "cx_px", "cy_px"))
-        dist = [float(v) for v in data["dist"]]
-        w0, h0 = int(data["width"]), int(data["height"])
-    except (TypeError, ValueError) as exc:
-        raise NodeError(f"lens file {path}: a value is not a number ({exc})", hint=_HINT) from exc
-    model = data.get("model", "pinhole")
-    if model not in LENS_MODELS:
-        raise NodeError(f"lens file {path}: model {model!r} is not one of {', '.join(LENS_MODELS)}", hint=_HINT)
+    data = read_data_file(path, "lens file", NodeError)  # JSON, or YAML read safely; errors name the file and line
+    fields = lens_fields(data, path)
+    fx, fy, cx, cy, dist, model = (fields[k] for k in ("fx", "fy", "cx", "cy", "dist", "model"))
+    w0, h0 = fields["width"], fields["height"]
     terms = LENS_MODELS[model]
     if len(dist) > terms[0] or any(dist[terms[0]:]) or not all(np.isfinite([fx, fy, cx, cy, *dist])) or min(fx, fy) <= 0:
         raise NodeError(f"lens file {path}: a {model} lens expects positive focal lengths and at most {terms[0]} finite "
                         f"distortion terms ({terms[1]}), has fx {fx}, fy {fy}, dist {dist}", hint=_HINT)
     if (w0, h0) != (width, height):
-        raise NodeError(f"lens file {path}: calibrated on {w0}x{h0} frames, the video's are {width}x{height}",
-                        hint="film the checkerboard with the same camera, resolution and zoom as the take, and calibrate again")
+        if not fields["scalable"] or abs(w0 * height - h0 * width) > 0.005 * w0 * height:
+            raise NodeError(f"lens file {path}: calibrated on {w0}x{h0} frames, the video's are {width}x{height}",
+                            hint="film the checkerboard with the same camera, resolution and zoom as the take, and "
+                                 "calibrate again" + ("" if not fields["scalable"] else
+                                                      " (or take the Gyroflow profile of this resolution's shape)"))
+        s0x, s0y = width / w0, height / h0  # a profile of the same frame shape at another resolution: scaled
+        fx, fy, cx, cy = fx * s0x, fy * s0y, (cx + 0.5) * s0x - 0.5, (cy + 0.5) * s0y - 0.5
     sx, sy = (scaled[0] / width, scaled[1] / height) if scaled is not None else (1.0, 1.0)
     K = [[fx * sx, 0.0, (cx + 0.5) * sx - 0.5], [0.0, fy * sy, (cy + 0.5) * sy - 0.5], [0.0, 0.0, 1.0]]
     dist = (dist + [0.0] * terms[0])[:terms[0]]
@@ -75,6 +73,51 @@ def read_lens_file(path: str | Path, width: int, height: int, scaled: tuple[int,
         focal = min(focal, (w - 1) / 2.0 / float(reach))
     return LensUndistortion(K=K, model=model, dist=dist, focal_px=focal, source=str(path))
 
+
+def lens_fields(data, path: Path) -> dict:
+    """``{fx, fy, cx, cy (px), dist (list), model, width, height (px), scalable}`` from a lens file's content
+    (:func:`read_lens_file`'s three kinds); ``scalable``: the file may serve another resolution of the same shape."""
+    if not isinstance(data, dict):
+        raise NodeError(f"lens file {path}: not a mapping of keys to values", hint=_HINT)
+    try:
+        if "calib_dimension" in data:  # a Gyroflow lens profile
+            fisheye = data.get("fisheye_params")
+            other = data.get("distortion_model")
+            if not isinstance(fisheye, dict) or (other not in (None, "opencv_fisheye")) or data.get("use_opencv_standard"):
+                raise NodeError(f"lens file {path}: a Gyroflow profile whose lens model ({other or 'not OpenCV fisheye'}) "
+                                "is not read here; only OpenCV fisheye profiles (fisheye_params) are", hint=_HINT)
+            K = np.asarray(fisheye["camera_matrix"], float)
+            return {"fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2], "cy": K[1, 2], "model": "fisheye",
+                    "dist": [float(v) for v in fisheye["distortion_coeffs"]], "width": int(data["calib_dimension"]["w"]),
+                    "height": int(data["calib_dimension"]["h"]), "scalable": True}
+        if "camera_matrix" in data and "image_width" in data:  # a ROS camera_info YAML
+            K = np.asarray(data["camera_matrix"]["data"], float).reshape(3, 3)
+            kind = data.get("distortion_model", "plumb_bob")
+            if kind not in ROS_MODELS:
+                raise NodeError(f"lens file {path}: distortion_model {kind!r} is not read here (only "
+                                f"{', '.join(ROS_MODELS)})", hint=_HINT)
+            return {"fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2], "cy": K[1, 2], "model": ROS_MODELS[kind],
+                    "dist": [float(v) for v in data["distortion_coefficients"]["data"]],
+                    "width": int(data["image_width"]), "height": int(data["image_height"]), "scalable": False}
+        need = ("fx_px", "fy_px", "cx_px", "cy_px", "dist", "width", "height")
+        missing = [k for k in need if k not in data]
+        if missing:
+            raise NodeError(f"lens file {path}: no {', '.join(missing)} in it (not a lens.json of "
+                            "pipelines/checkerboard.yaml, a Gyroflow lens profile or a ROS camera_info file, or a lens.json "
+                            "written before it recorded the image size)", hint=_HINT)
+        model = data.get("model", "pinhole")
+        if model not in LENS_MODELS:
+            raise NodeError(f"lens file {path}: model {model!r} is not one of {', '.join(LENS_MODELS)}", hint=_HINT)
+        return {"fx": float(data["fx_px"]), "fy": float(data["fy_px"]), "cx": float(data["cx_px"]),
+                "cy": float(data["cy_px"]), "model": model, "dist": [float(v) for v in data["dist"]],
+                "width": int(data["width"]), "height": int(data["height"]), "scalable": False}
+    except (TypeError, ValueError, KeyError, IndexError) as exc:
+        raise NodeError(f"lens file {path}: a value is missing or not a number ({type(exc).__name__}: {exc})",
+                        hint=_HINT) from exc
+
+
+#: a ROS camera_info's ``distortion_model`` -> the lens model here
+ROS_MODELS = {"plumb_bob": "pinhole", "equidistant": "fisheye"}
 
 #: lens.json's ``model`` -> (number of distortion terms, their names)
 LENS_MODELS = {"pinhole": (5, "k1 k2 p1 p2 k3"), "fisheye": (4, "k1 k2 k3 k4")}

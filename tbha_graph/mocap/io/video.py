@@ -47,8 +47,9 @@ class VideoParams(BaseModel):
         json_schema_extra={"unit": "Hz"},
     )
     lens: InputPath | None = Field(
-        None, description="lens.json of pipelines/checkerboard.yaml for this camera: its distortion is removed from "
-        "every frame as it is read (a wide-angle or action camera); null: the frames as they are",
+        None, description="lens.json of pipelines/checkerboard.yaml for this camera (or its Gyroflow lens profile, or "
+        "a ROS camera_info YAML): its distortion is removed from every frame as it is read (a wide-angle or action "
+        "camera); null: the frames as they are",
     )
     lens_view: Literal["calibrated", "width"] = Field(
         "calibrated", description="with a lens file: the straightened frames keep the calibrated focal length "
