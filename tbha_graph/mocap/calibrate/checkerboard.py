@@ -183,11 +183,11 @@ def checkerboard(ctx):
     kept = view_kept(K, dist, model, *size)
     _, index, grey, corners = widest
     centre = (np.array(size) - 1) / 2.0
-    reach = max(float(np.linalg.norm(c.reshape(-1, 2) - centre, axis=-1).max()) for _, c in views) / float(np.hypot(*centre))
+    reached = max(float(np.linalg.norm(c.reshape(-1, 2) - centre, axis=-1).max()) for _, c in views) / float(np.hypot(*centre))
     warnings = []
-    if reach < BOARD_REACH_WARN and bend > 1.0:
+    if reached < BOARD_REACH_WARN and bend > 1.0:
         warnings.append(
-            f"{p.path}: the boards reached {100 * reach:.0f} % of the way from the image's centre to its corners; "
+            f"{p.path}: the boards reached {100 * reached:.0f} % of the way from the image's centre to its corners; "
             f"beyond, the lens's distortion ({bend:.0f} px at the corners) is extrapolated, and a wrong lens model "
             "fits the boards as well as the right one there: film the board near the frame's edges and corners too")
     for w in warnings:
@@ -217,7 +217,7 @@ def checkerboard(ctx):
         "width": int(size[0]), "height": int(size[1]),  # the frame size it holds for (io.video's lens checks it)
         "bend_px_at_corners": round(bend, 2) if np.isfinite(bend) else None,  # how far the lens moves the image's corners
         "view_kept_pct": round(100 * kept, 1),  # of the filmed frame, in the straightened frames
-        "board_reach_pct": round(100 * reach, 1),  # farthest board corner, of the way from the centre to the corners
+        "board_reach_pct": round(100 * reached, 1),  # farthest board corner, of the way from the centre to the corners
         "dist": dist.tolist(),
         "warnings": warnings,
     }, "picture": picture}
