@@ -449,8 +449,8 @@ def test_a_fisheye_lens_is_calibrated_with_the_fisheye_model(tmp_path):
     over the whole frame (1.1 px at its middle: the principal point, as 12 views find it) and k1 k2's is 41 px off at
     the rim; the straightened frames keep 73.7 % of the filmed one (truth 73.6), the corners bent 176 px (177.5)."""
     from tbha_graph.core.node import Context
-    from tbha_graph.mocap.calibrate.checkerboard import bend_at_corners, view_kept
-    from tbha_graph.mocap.io.lens_file import ideal_points
+    from tbha_graph.mocap.calibrate.checkerboard import bend_at_corners
+    from tbha_graph.mocap.io.lens_file import ideal_points, view_kept
 
     _fisheye_board_views(tmp_path, FISHEYE, 9, 6, 0.03, 12)
     ctx = Context("calibrate", checkerboard.params.model_validate(
@@ -465,7 +465,7 @@ def test_a_fisheye_lens_is_calibrated_with_the_fisheye_model(tmp_path):
         K = np.array([[r["fx_px"], 0, r["cx_px"]], [0, r["fy_px"], r["cy_px"]], [0, 0, 1]])
         return np.linalg.norm(ideal_points(grid, K, np.array(r["dist"]), r["model"], FISHEYE.K) - truth, axis=-1).max()
 
-    true_kept = 100 * view_kept(FISHEYE.K, FISHEYE.dist, "fisheye", W, H)
+    true_kept = 100 * view_kept(FISHEYE.K, FISHEYE.dist, "fisheye", W, H, 420.0)
     true_bend = bend_at_corners(FISHEYE.K, FISHEYE.dist, W, H, "fisheye")
     print(f"fisheye fit: {rep['views_used']} views reaching {rep['board_reach_pct']} %, rms "
           f"{rep['rms_reprojection_px']:.3f} px, undistortion off by {off(rep):.2f} px at most; k1k2 fit rms "
@@ -531,6 +531,26 @@ def test_a_fisheye_lens_file_straightens_the_take(tmp_path):
     print(f"lens_view=width: focal {whole.lens.focal_px:.1f} px, edges {shift['whole']:.2f} px from the zoomed-out pinhole frames'")
     # 653.5: the side's 319.5 px is 0.4564 rad through the lens (/700), 0.4547 rad off the axis (k1 k2), tan -> 0.4889
     assert whole.lens.focal_px == pytest.approx(653.5, abs=0.5) and shift["whole"] < 0.12  # measured 0.07 px
+    # the run says how much of the filmed frame the straightened frames show (88 % at 700 px, 98 % at 653.5)
+    from tbha_graph.core.node import Context
+
+    class Lines:
+        def __init__(self):
+            self.lines = []
+
+        def log(self, node_id, msg):
+            self.lines.append(msg)
+
+    said = {}
+    for view in ("calibrated", "width"):
+        lines = Lines()
+        VIDEO_NODE.fn(Context("decode", VIDEO_NODE.params.model_validate(
+            {"path": tmp_path / "fish.avi", "lens": lens, "lens_view": view}), reporter=lines), None)
+        said[view] = lines.lines
+    assert said["calibrated"] == ["lens file lens.json (fisheye): frames straightened to a 700 px pinhole camera, "
+                                  "showing 88 % of the filmed frame (lens_view=width keeps its whole width)"]
+    assert said["width"] == ["lens file lens.json (fisheye): frames straightened to a 653 px pinhole camera, "
+                             "showing 98 % of the filmed frame"]
     wrong = tmp_path / "wrong.json"
     wrong.write_text(json.dumps({**FISHEYE_700.lens_json(), "dist": [0.02, -0.01, 0.0, 0.0, 0.1]}))
     with pytest.raises(NodeError, match=r"wrong\.json: a fisheye lens expects .* at most 4 finite distortion terms"):

@@ -30,7 +30,7 @@ from ...core.atomic import atomic_write_bytes
 from ...core.errors import NodeError
 from ...core.node import InputPath, node
 from ..camera import Camera, centred_intrinsics
-from ..io.lens_file import ideal_points, straighten_image
+from ..io.lens_file import ideal_points, straighten_image, view_kept
 from ..ports import CAMERA, IMAGE, REPORT
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
@@ -114,18 +114,6 @@ def bend_at_corners(K: np.ndarray, dist: np.ndarray, width: int, height: int, mo
     return float(np.inf) if np.isnan(moved).any() else float(moved.max())
 
 
-def view_kept(K: np.ndarray, dist: np.ndarray, model: str, width: int, height: int) -> float:
-    """The fraction (0-1) of the filmed ``width`` x ``height`` frame that the straightened frames (the pinhole camera
-    :func:`..camera.centred_intrinsics` of the mean focal length, as ``io.video`` reads a take with the lens file)
-    still show: the rest falls outside them."""
-    P = centred_intrinsics(0.5 * (K[0, 0] + K[1, 1]), width, height)
-    step = max(1, width // 320)  # a pixel in step x step: the fraction to a fraction of a percent
-    u, v = np.meshgrid(np.arange(0, width, step, dtype=np.float64), np.arange(0, height, step, dtype=np.float64))
-    ideal = ideal_points(np.stack([u, v], -1).reshape(-1, 2), K, dist, model, P)  # every filmed pixel, straightened
-    inside = (ideal[:, 0] >= -0.5) & (ideal[:, 0] <= width - 0.5) & (ideal[:, 1] >= -0.5) & (ideal[:, 1] <= height - 0.5)
-    return float(inside.mean())
-
-
 def draw_rows(grey: np.ndarray, corners: np.ndarray, columns: int, rows: int, caption: str) -> np.ndarray:
     """BGR ``(h, w, 3)`` image of ``grey`` with each row of ``corners`` ``(columns * rows, 2)`` pixels (OpenCV's
     order) drawn in green over the straight line through its two ends in red: a lens that bends lines shows as rows
@@ -180,7 +168,7 @@ def checkerboard(ctx):
     model = "fisheye" if p.distortion == "fisheye" else "pinhole"
     rms, K, dist, rvecs, tvecs = calibrate_views(obj, [c for _, c in views], size, p.distortion, p.path)
     bend = bend_at_corners(K, dist, *size, model=model)
-    kept = view_kept(K, dist, model, *size)
+    kept = view_kept(K, dist, model, *size, 0.5 * (K[0, 0] + K[1, 1]))
     _, index, grey, corners = widest
     centre = (np.array(size) - 1) / 2.0
     reached = max(float(np.linalg.norm(c.reshape(-1, 2) - centre, axis=-1).max()) for _, c in views) / float(np.hypot(*centre))

@@ -141,6 +141,18 @@ def ideal_points(points: np.ndarray, K: np.ndarray, dist: np.ndarray, model: str
     return cv2.undistortPoints(pts, K, dist, P=P).reshape(-1, 2)
 
 
+def view_kept(K: np.ndarray, dist: np.ndarray, model: str, width: int, height: int, focal_px: float) -> float:
+    """The fraction (0-1) of the filmed ``width`` x ``height`` frame (through the lens ``K``, ``dist``, ``model``)
+    that the straightened frames (:func:`..camera.centred_intrinsics` of ``focal_px``, as :func:`undistort` makes
+    them) still show: the rest falls outside them."""
+    P = centred_intrinsics(focal_px, width, height)
+    step = max(1, width // 320)  # a pixel in step x step: the fraction to a fraction of a percent
+    u, v = np.meshgrid(np.arange(0, width, step, dtype=np.float64), np.arange(0, height, step, dtype=np.float64))
+    ideal = ideal_points(np.stack([u, v], -1).reshape(-1, 2), K, dist, model, P)  # every filmed pixel, straightened
+    inside = (ideal[:, 0] >= -0.5) & (ideal[:, 0] <= width - 0.5) & (ideal[:, 1] >= -0.5) & (ideal[:, 1] <= height - 0.5)
+    return float(inside.mean())
+
+
 def straighten_image(image: np.ndarray, K: np.ndarray, dist: np.ndarray, model: str, P: np.ndarray) -> np.ndarray:
     """``image`` ``(h, w[, 3])`` filmed through the lens, as the pinhole camera ``P`` ``(3, 3)`` of the same size
     sees it (bilinear; pixels whose ray falls outside the filmed frame black)."""

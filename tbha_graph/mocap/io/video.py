@@ -23,7 +23,7 @@ from ...core.filehash import file_content_hash
 from ...core.node import InputPath, node, optional
 from ..ports import VIDEO, VIDEO_FILE, VideoClip
 from .avi_cut import avi_cut_frame
-from .lens_file import read_lens_file, undistort
+from .lens_file import read_lens_file, undistort, view_kept
 from .mp4_times import frame_times, uneven_frame_times
 
 _OPEN_HINT = "check that the file is a video OpenCV can decode (e.g. .mp4 with mp4v/H.264, .avi with MJPG)"
@@ -256,6 +256,12 @@ def video(ctx, file) -> dict:
         )
     clip = probe_video(file if file is not None else p.path, start=p.start, stop=p.stop, scale=p.scale, fps=p.fps,
                        lens=p.lens, lens_view=p.lens_view)
+    if clip.lens is not None:
+        kept = view_kept(np.array(clip.lens.K), np.array(clip.lens.dist), clip.lens.model, clip.width, clip.height,
+                         clip.lens.focal_px)
+        ctx.log(f"lens file {Path(clip.lens.source).name} ({clip.lens.model}): frames straightened to a "
+                f"{clip.lens.focal_px:.0f} px pinhole camera, showing {100 * kept:.0f} % of the filmed frame"
+                + (" (lens_view=width keeps its whole width)" if p.lens_view == "calibrated" and kept < 0.95 else ""))
     times = frame_times(clip.path)
     uneven = uneven_frame_times(times, clip.start, clip.stop) if times is not None and len(times) >= clip.stop else None
     if uneven is not None:
