@@ -382,7 +382,7 @@ def vanishing_points(ctx, video) -> dict:
                             up_cam=found.get("up_cam") if agree else None, up_sd_deg=found.get("up_sd_deg") if agree else None)
         ctx.log(lens.source + (f" (the room's lines gave {f:.0f} px)" if f is not None else ""))
         if f is not None and sd is not None and sd <= p.max_sd_pct and \
-                abs(f / calibrated.focal_px - 1.0) > max(LENS_FILE_DISAGREE, 3e-2 * sd):
+                abs(f / calibrated.focal_px - 1.0) > max(LENS_FILE_DISAGREE, 3 * sd / 100):
             ctx.warn(f"the room's lines give a focal length of {f:.0f} px ± {sd:.1f} %, the lens file "
                      f"{Path(calibrated.source).name} {calibrated.focal_px:.0f} px (used): a lens file of another camera "
                      "or zoom? Calibrate the lens with the camera, resolution and zoom of this take")

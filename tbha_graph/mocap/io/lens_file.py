@@ -28,6 +28,13 @@ from ..ports import LensUndistortion
 _HINT = "give the lens.json that pipelines/checkerboard.yaml wrote for this camera at the video's resolution and zoom"
 
 
+#: a ROS camera_info's ``distortion_model`` -> the lens model here
+ROS_MODELS = {"plumb_bob": "pinhole", "equidistant": "fisheye"}
+
+#: lens.json's ``model`` -> (number of distortion terms, their names)
+LENS_MODELS = {"pinhole": (5, "k1 k2 p1 p2 k3"), "fisheye": (4, "k1 k2 k3 k4")}
+
+
 def read_lens_file(path: str | Path, width: int, height: int, scaled: tuple[int, int] | None = None,
                    view: str = "calibrated") -> LensUndistortion:
     """The calibration in ``path`` for a video whose file frames are ``width`` x ``height`` pixels, read downscaled
@@ -56,9 +63,8 @@ def read_lens_file(path: str | Path, width: int, height: int, scaled: tuple[int,
                             hint="film the checkerboard with the same camera, resolution and zoom as the take, and "
                                  "calibrate again" + ("" if not fields["scalable"] else
                                                       " (or take the Gyroflow profile of this resolution's shape)"))
-        s0x, s0y = width / w0, height / h0  # a profile of the same frame shape at another resolution: scaled
-        fx, fy, cx, cy = fx * s0x, fy * s0y, (cx + 0.5) * s0x - 0.5, (cy + 0.5) * s0y - 0.5
-    sx, sy = (scaled[0] / width, scaled[1] / height) if scaled is not None else (1.0, 1.0)
+    # to the frames as read: a profile of the same frame shape at another resolution, and decode's downscaling
+    sx, sy = (scaled[0] / w0, scaled[1] / h0) if scaled is not None else (width / w0, height / h0)
     K = [[fx * sx, 0.0, (cx + 0.5) * sx - 0.5], [0.0, fy * sy, (cy + 0.5) * sy - 0.5], [0.0, 0.0, 1.0]]
     dist = (dist + [0.0] * terms[0])[:terms[0]]
     focal = 0.5 * (fx * sx + fy * sy)
@@ -114,13 +120,6 @@ def lens_fields(data, path: Path) -> dict:
     except (TypeError, ValueError, KeyError, IndexError) as exc:
         raise NodeError(f"lens file {path}: a value is missing or not a number ({type(exc).__name__}: {exc})",
                         hint=_HINT) from exc
-
-
-#: a ROS camera_info's ``distortion_model`` -> the lens model here
-ROS_MODELS = {"plumb_bob": "pinhole", "equidistant": "fisheye"}
-
-#: lens.json's ``model`` -> (number of distortion terms, their names)
-LENS_MODELS = {"pinhole": (5, "k1 k2 p1 p2 k3"), "fisheye": (4, "k1 k2 k3 k4")}
 
 
 def ideal_points(points: np.ndarray, K: np.ndarray, dist: np.ndarray, model: str, P: np.ndarray) -> np.ndarray:
