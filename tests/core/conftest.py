@@ -33,29 +33,3 @@ def write(tmp_path):
         return p
 
     return _write
-
-
-CHAIN = """
-description: a small chain
-nodes:
-  src:
-    type: test.source
-    params: {n: 5, value: 2.0}
-  double:
-    type: test.scale
-    inputs: {x: src.x}
-    params: {factor: 2}
-  triple:
-    type: test.scale
-    inputs: {x: src.x}
-    params: {factor: 3}
-  sum:
-    type: test.add
-    inputs: {a: double.y, b: triple.y}
-  stats:
-    type: test.metrics
-    inputs: {x: sum.y}
-outputs:
-  sum.npz: sum.y
-  metrics.json: stats.metrics
-"""

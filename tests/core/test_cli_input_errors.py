@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from conftest import CHAIN
+from testnodes import CHAIN
 
 from tbha_graph.cli import graph as graph_cli
 from tbha_graph.cli import run as run_cli

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import CHAIN
+from testnodes import CHAIN
 
 from tbha_graph.core.errors import NodeFailed
 from tbha_graph.core.runner import load_graph, run_graph

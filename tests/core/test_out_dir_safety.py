@@ -4,7 +4,7 @@ from __future__ import annotations
 import json
 
 import pytest
-from conftest import CHAIN
+from testnodes import CHAIN
 
 from tbha_graph.core.errors import TbhaError
 from tbha_graph.core.runner import load_graph, run_graph

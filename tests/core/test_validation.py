@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import pytest
-from conftest import CHAIN
+from testnodes import CHAIN
 
 from tbha_graph.core.errors import PipelineErrors
 from tbha_graph.core.runner import load_graph

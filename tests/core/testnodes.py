@@ -178,3 +178,30 @@ def steps(ctx, x):
             f.write(f"{k}\n")
             f.flush()
     return x * 1.0
+
+
+#: a small pipeline of these nodes (src -> double, triple -> sum -> stats), shared by the framework's tests
+CHAIN = """
+description: a small chain
+nodes:
+  src:
+    type: test.source
+    params: {n: 5, value: 2.0}
+  double:
+    type: test.scale
+    inputs: {x: src.x}
+    params: {factor: 2}
+  triple:
+    type: test.scale
+    inputs: {x: src.x}
+    params: {factor: 3}
+  sum:
+    type: test.add
+    inputs: {a: double.y, b: triple.y}
+  stats:
+    type: test.metrics
+    inputs: {x: sum.y}
+outputs:
+  sum.npz: sum.y
+  metrics.json: stats.metrics
+"""
