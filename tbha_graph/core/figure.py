@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ...core.atomic import atomic_path
+from .atomic import atomic_path
 
 
 def save_png(fig, path: str | Path, dpi: int) -> Path:

@@ -18,7 +18,8 @@ A study file::
 
 Every (variant, input) runs on the shared cache, so what variants have in common is computed once.
 A failing variant is recorded with its error and the others still run. Results: ``results.csv`` and
-``results.md`` (variant, input, status, wall time, every metric), plus a run directory per pair.
+``results.md`` (variant, input, status, wall time, every metric), ``results.png`` (the figures charted, a panel
+each: :mod:`.study_chart`), plus a run directory per pair.
 """
 from __future__ import annotations
 
@@ -150,6 +151,9 @@ def run_study(
             row["wall_s"] = round(time.perf_counter() - t0, 3)
             rows.append(row)
     write_tables(rows, out_dir)
+    from .study_chart import write_chart
+
+    write_chart(rows, out_dir, study.get("columns"), title=str(study.get("description") or path.stem))
     return rows
 
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import CHAIN
+from testnodes import CHAIN
 
 import testnodes
 from tbha_graph.cli import graph as graph_cli
@@ -121,6 +121,7 @@ def test_study_table_with_failing_variant(write, tmp_path, registry):
     md = (tmp_path / "st" / "results.md").read_text()
     assert "| variant | input | status |" in md and "broken" in md
     assert (tmp_path / "st" / "results.csv").read_text().startswith("variant,input,status")
+    assert (tmp_path / "st" / "results.png").is_file()  # the figures charted (the test below)
 
 
 def test_python_api_without_yaml(tmp_path):
@@ -253,3 +254,25 @@ def test_dask_executor_matches_local_and_runs_independent_nodes_in_parallel(writ
     # the two independent nodes ran at the same time, in two worker processes
     (s1, e1, p1), (s2, e2, p2) = [tuple(map(float, ln.split())) for ln in log.read_text().splitlines()]
     assert p1 != p2 and max(s1, s2) < min(e1, e2)
+
+
+def test_study_chart_draws_each_figure_as_bars_in_proportion(tmp_path):
+    """results.png: a panel per figure (the run's bookkeeping and text left out), a bar per variant and input whose
+    length in the picture is its value (a bar twice as long for twice the figure), failed runs named not drawn."""
+    import cv2
+
+    from tbha_graph.core.study_chart import chart_bars, chart_columns, write_chart
+
+    rows = [{"variant": "a", "input": "x", "status": "ok", "wall_s": 3.0, "ran": 4, "cached": 0, "mm": 10.0, "ok": True, "name": "t"},
+            {"variant": "b", "input": "x", "status": "ok", "wall_s": 0.1, "ran": 1, "cached": 3, "mm": 20.0},
+            {"variant": "c", "input": "x", "status": "failed", "wall_s": 0.1, "error": "boom"}]
+    assert chart_columns(rows) == ["mm"] and chart_columns(rows, ["name", "mm", "missing"]) == ["mm"]
+    assert chart_bars(rows, "mm") == (["a", "b", "c"], ["x"], {("a", "x"): 10.0, ("b", "x"): 20.0, ("c", "x"): "failed"})
+    png = write_chart(rows, tmp_path / "st", title="two bars")
+    img = cv2.imread(str(png))
+    blue = np.all(np.abs(img.astype(int) - (180, 119, 31)) < 8, axis=-1)  # matplotlib's first colour, C0, in BGR
+    ys = np.flatnonzero(blue.any(axis=1))
+    bands = np.split(ys, np.flatnonzero(np.diff(ys) > 1) + 1)
+    widths = [blue[b].sum(axis=1).max() for b in bands]
+    assert len(bands) == 2 and widths[1] == pytest.approx(2 * widths[0], rel=0.03), widths
+    assert write_chart([rows[2]], tmp_path / "none") is None and not (tmp_path / "none" / "results.png").exists()

@@ -23,7 +23,7 @@ def test_every_variant_of_every_bundled_study_runs(study, tmp_path):
     failed = {f"{r['variant']}/{r['input']}": r.get("error") for r in rows if r["status"] != "ok"}
     assert failed == {}
     assert all(isinstance(r.get("mpjpe_mm"), float) for r in rows)
-    assert (tmp_path / "out" / "results.md").is_file()
+    assert (tmp_path / "out" / "results.md").is_file() and (tmp_path / "out" / "results.png").is_file()
 
 
 def test_study_set_reaches_every_run_and_errors_are_whole(tmp_path):

@@ -12,7 +12,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from ...core.node import node
 from ..ports import IMAGE, SIDES
 from ..skeleton import JOINT_NAMES, N_JOINTS
-from .png import new_figure, save_png
+from ...core.figure import new_figure, save_png
 
 
 class DepthSidesParams(BaseModel):

@@ -21,7 +21,7 @@ from ...core.errors import NodeError
 from ...core.node import node
 from ..ports import ERRORS, IMAGE
 from . import style
-from .png import new_figure, save_png
+from ...core.figure import new_figure, save_png
 
 
 class ErrorPlotParams(BaseModel):

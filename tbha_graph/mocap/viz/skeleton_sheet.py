@@ -23,7 +23,7 @@ from ...core.node import node
 from ..ports import IMAGE, MOTION
 from ..skeleton import BONES, JOINT_INDEX, N_JOINTS
 from . import style
-from .png import new_figure, save_png
+from ...core.figure import new_figure, save_png
 
 _L_SH, _R_SH = JOINT_INDEX["left_shoulder"], JOINT_INDEX["right_shoulder"]
 _L_HIP, _R_HIP = JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"]
