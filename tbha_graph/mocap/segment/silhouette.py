@@ -112,11 +112,15 @@ def background_model(samples: np.ndarray, actor: np.ndarray, min_samples: int) -
     for r in range(0, h, rows):
         s = samples[:, r:r + rows].astype(np.float32)
         f = free[:, r:r + rows]
-        s[~f] = np.nan
-        # a pixel with no free sample: 0s, not all NaN (nanmedian would warn "All-NaN slice"); its median 0
-        # is not kept: with fewer than min_samples free samples it is not `known` and is painted in below
-        s[:, ~f.any(axis=0)] = 0.0
-        bg[r:r + rows] = np.nanmedian(s, axis=0)
+        s[~f] = np.inf  # the actor's samples sort after the free ones
+        s.sort(axis=0)
+        c = f.sum(axis=0)[..., None]  # free samples per pixel
+        lo, hi = np.maximum((c - 1) // 2, 0), c // 2  # the middle one (c odd) or two (c even) of the sorted free ones
+        # np.nanmedian's values (8-bit samples: their medians are whole or half numbers, exact in float32), 3.5x
+        # faster; a pixel with no free sample gets 0, not kept: with fewer than min_samples free samples it is not
+        # `known` and is painted in below
+        med = 0.5 * (np.take_along_axis(s, lo[None], 0)[0] + np.take_along_axis(s, hi[None], 0)[0])
+        bg[r:r + rows] = np.where(c > 0, med, 0.0)
     count = free.sum(axis=0)
     known = count >= min_samples
     if not known.all():  # the actor is always near: the background there painted in from around it
@@ -125,14 +129,35 @@ def background_model(samples: np.ndarray, actor: np.ndarray, min_samples: int) -
     return bg, known
 
 
-def foreground(frame: np.ndarray, bg: np.ndarray, p: SilhouetteParams) -> np.ndarray:
-    """The actor's mask ``(H', W')`` uint8 (255 = actor) in one reduced BGR frame ``(H', W', 3)``, holes filled."""
+def _channel_max(a: np.ndarray) -> np.ndarray:
+    """``a.max(axis=2)`` of an ``(H, W, 3)`` float32 array, the same values, by OpenCV on the split channels
+    (numpy's reduction over a last axis of 3 is about 15x slower)."""
+    c = cv2.split(a)
+    return cv2.max(cv2.max(c[0], c[1]), c[2])
+
+
+def _channel_min(a: np.ndarray) -> np.ndarray:
+    """``a.min(axis=2)`` of an ``(H, W, 3)`` float32 array, as :func:`_channel_max`."""
+    c = cv2.split(a)
+    return cv2.min(cv2.min(c[0], c[1]), c[2])
+
+
+def changed(frame: np.ndarray, bg: np.ndarray, p: SilhouetteParams) -> np.ndarray:
+    """``(H', W')`` uint8, 255 where the reduced BGR frame ``(H', W', 3)`` differs from the background ``bg`` by more
+    than ``threshold`` in some channel and not as a shadow does (every channel dimmed or lit in the same ratio)."""
     f = frame.astype(np.float32)
-    diff = np.abs(f - bg).max(axis=2)
-    ratio = (f + 1.0) / (bg + 1.0)
-    rmax, rmin = ratio.max(axis=2), ratio.min(axis=2)
+    diff = _channel_max(cv2.absdiff(f, bg))  # OpenCV's elementwise float32 arithmetic: numpy's values, 10-25x faster
+    one = (1.0, 1.0, 1.0, 0.0)  # a scalar per channel (OpenCV 4 adds a bare 1.0 to the first channel only)
+    ratio = cv2.divide(cv2.add(f, one), cv2.add(bg, one))
+    rmax, rmin = _channel_max(ratio), _channel_min(ratio)
     shadow = (rmax <= p.shadow_ratio[1]) & (rmin >= p.shadow_ratio[0]) & (rmax - rmin <= p.shadow_spread)
-    fg = ((diff > p.threshold) & ~shadow).astype(np.uint8) * 255
+    return ((diff > p.threshold) & ~shadow).astype(np.uint8) * 255
+
+
+def foreground(frame: np.ndarray, bg: np.ndarray, p: SilhouetteParams) -> np.ndarray:
+    """The actor's mask ``(H', W')`` uint8 (255 = actor) in one reduced BGR frame ``(H', W', 3)``: :func:`changed`,
+    opened and closed, its small regions dropped, holes filled."""
+    fg = changed(frame, bg, p)
     fg = cv2.morphologyEx(fg, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (p.open_px, p.open_px)))
     fg = cv2.morphologyEx(fg, cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (p.close_px, p.close_px)))
     n, lab, stats, _ = cv2.connectedComponentsWithStats(fg, connectivity=8)
