@@ -83,7 +83,7 @@ def write_chart(rows: list[dict[str, Any]], out_dir: Path, columns: list[str] | 
                 if isinstance(v, str):
                     ax.text(0.0, y, " failed", va="center", ha="left", fontsize=7, color="#b00020")
                     continue
-                ax.barh(y, v, height=height * 0.9, color=colours[ii], label=inp if (p == 0 and vi == 0) else None)
+                ax.barh(y, v, height=height * 0.9, color=colours[ii])
                 ax.text(v, y, f" {v:.4g}", va="center", ha="left" if v >= 0 else "right", fontsize=7)
         ax.set_yticks(range(len(variants)), variants if p % per_row == 0 else [""] * len(variants), fontsize=8)
         ax.set_ylim(len(variants) - 0.5, -0.5)  # the study's first variant at the top, as in the table
@@ -93,8 +93,11 @@ def write_chart(rows: list[dict[str, Any]], out_dir: Path, columns: list[str] | 
         ax.set_title(col, fontsize=9)
         ax.tick_params(axis="x", labelsize=7)
         ax.grid(axis="x", alpha=0.3)
-    if len(inputs) > 1:
-        fig.legend(loc="outside lower center", ncols=min(len(inputs), 6), fontsize=8, title="input", title_fontsize=8)
+    if len(inputs) > 1:  # one swatch per input, whichever runs failed
+        from matplotlib.patches import Patch
+
+        fig.legend(handles=[Patch(color=c, label=inp) for c, inp in zip(colours, inputs)], loc="outside lower center",
+                   ncols=min(len(inputs), 6), fontsize=8, title="input", title_fontsize=8)
     if title:
         fig.suptitle(title, fontsize=10)
     Path(out_dir).mkdir(parents=True, exist_ok=True)
