@@ -6,7 +6,8 @@ missing, a synthetic clip is drawn (:mod:`tbha_graph.mocap.segment.testframes`).
 
 Prints ``name=value`` lines. ``*_fps`` are frames per second of wall-clock time, best of ``--repeat``
 runs, on frames already decoded in memory (``decode_fps`` is decoding alone; ``chain_fps`` runs the
-nodes io.video -> segment.hierarchical -> track.posture_kalman, decoding included). ``*_cpu_fps`` use
+nodes io.video -> segment.hierarchical -> track.posture_kalman, decoding included; ``silhouette_fps`` the
+actor's outline, segment.silhouette's two passes over the video). ``*_cpu_fps`` use
 process CPU time instead (steadier on a busy machine; OpenCV threads count twice). Accuracy:
 pixels, over visible patches, against the projected joints (``joints2d``) and patch centres (``patch2d``).
 """
@@ -29,6 +30,7 @@ from tbha_graph.mocap.io.video import iter_frames, probe_video, video  # noqa: E
 from tbha_graph.mocap.segment.chroma_threshold import ChromaThresholdParams, chroma_threshold, threshold_frame  # noqa: E402
 from tbha_graph.mocap.segment.hierarchical import HierarchicalParams, HierarchicalSegmenter, hierarchical  # noqa: E402
 from tbha_graph.mocap.segment.labels import PixelClassifier  # noqa: E402
+from tbha_graph.mocap.segment.silhouette import SilhouetteParams, silhouette_clip  # noqa: E402
 from tbha_graph.mocap.skeleton import JOINT_INDEX, PATCHED_JOINTS  # noqa: E402
 from tbha_graph.mocap.track.nearest import nearest  # noqa: E402
 from tbha_graph.mocap.track.posture_kalman import posture_kalman  # noqa: E402
@@ -105,6 +107,11 @@ def main() -> None:
     wall, cpu = best_of(chain, a.repeat)
     print(f"chain_fps={n / wall:.0f}")
     print(f"chain_cpu_fps={n / cpu:.0f}")
+
+    tracks = run_node(posture_kalman, detections=dets["hierarchical"], colors=model)["tracks"]
+    wall, cpu = best_of(lambda: silhouette_clip(vclip, tracks["points"], tracks["tracked"], SilhouetteParams()), a.repeat)
+    print(f"silhouette_fps={n / wall:.1f}")  # segment.silhouette's work: two passes over the video, decoding included
+    print(f"silhouette_cpu_fps={n / cpu:.1f}")
 
     gt_path = path.with_name("ground_truth.npz")
     if not gt_path.is_file():
