@@ -201,8 +201,7 @@ def cmd_study(args) -> int:
     rows = run_study(args.study, out, cache=cache, reporter=Reporter(quiet=args.quiet), executor=args.executor,
                      sets=parse_assignments(args.set, "--set"), jobs=args.jobs)
     print(to_markdown(rows))
-    chart = out / "results.png"
-    print(f"tables: {out / 'results.csv'}, {out / 'results.md'}" + (f"; chart: {chart}" if chart.is_file() else ""))
+    print(f"tables: {out / 'results.csv'}, {out / 'results.md'}; chart: {out / 'results.png'}")
     return EXIT_OK if all(r["status"] == "ok" for r in rows) else EXIT_FAILED
 
 

@@ -56,11 +56,17 @@ def chart_bars(rows: list[dict[str, Any]], column: str) -> tuple[list[str], list
 
 def write_chart(rows: list[dict[str, Any]], out_dir: Path, columns: list[str] | None = None, title: str = "",
                 stem: str = "results") -> Path | None:
-    """``<stem>.png`` under ``out_dir`` (written atomically) charting :func:`chart_columns`; None when no row
-    holds a figure (every run failed, or the study's pipeline gives no numbers)."""
+    """``<stem>.png`` under ``out_dir`` (written atomically) charting :func:`chart_columns`. When no row holds a
+    figure (every run failed, or the study's pipeline gives no numbers) the picture says so, so that a picture left
+    by an earlier run of the study is never shown as this one's."""
     cols = chart_columns(rows, columns)
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
     if not cols:
-        return None
+        fig = new_figure(6.0, 1.2)
+        failed = sum(r.get("status") == "failed" for r in rows)
+        fig.text(0.5, 0.5, f"{title}\nno figures to draw: {failed} of {len(rows)} runs failed (results.md has the errors)",
+                 ha="center", va="center", fontsize=9)
+        return save_png(fig, Path(out_dir) / f"{stem}.png", dpi=110)
     variants, inputs, _ = chart_bars(rows, cols[0])
     n_bars = len(variants) * len(inputs)
     per_row = min(PANELS_PER_ROW, len(cols))
@@ -100,5 +106,4 @@ def write_chart(rows: list[dict[str, Any]], out_dir: Path, columns: list[str] | 
                    ncols=min(len(inputs), 6), fontsize=8, title="input", title_fontsize=8)
     if title:
         fig.suptitle(title, fontsize=10)
-    Path(out_dir).mkdir(parents=True, exist_ok=True)
     return save_png(fig, Path(out_dir) / f"{stem}.png", dpi=110)

@@ -258,7 +258,8 @@ def test_dask_executor_matches_local_and_runs_independent_nodes_in_parallel(writ
 
 def test_study_chart_draws_each_figure_as_bars_in_proportion(tmp_path):
     """results.png: a panel per figure (the run's bookkeeping and text left out), a bar per variant and input whose
-    length in the picture is its value (a bar twice as long for twice the figure), failed runs named not drawn."""
+    length in the picture is its value (a bar twice as long for twice the figure), failed runs named not drawn; a
+    study without a figure gets a picture that says so (no bars), never the earlier run's left in place."""
     import cv2
 
     from tbha_graph.core.study_chart import chart_bars, chart_columns, write_chart
@@ -275,4 +276,5 @@ def test_study_chart_draws_each_figure_as_bars_in_proportion(tmp_path):
     bands = np.split(ys, np.flatnonzero(np.diff(ys) > 1) + 1)
     widths = [blue[b].sum(axis=1).max() for b in bands]
     assert len(bands) == 2 and widths[1] == pytest.approx(2 * widths[0], rel=0.03), widths
-    assert write_chart([rows[2]], tmp_path / "none") is None and not (tmp_path / "none" / "results.png").exists()
+    empty = write_chart([rows[2]], tmp_path / "st", title="all failed")  # replaces the earlier picture, says why
+    assert empty == png and not np.all(np.abs(cv2.imread(str(png)).astype(int) - (180, 119, 31)) < 8, axis=-1).any()
