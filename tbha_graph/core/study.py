@@ -35,6 +35,7 @@ from .progress import Reporter
 from .registry import Registry
 from .runner import load_graph, run_graph
 from .spec import merge_node_override, read_pipeline
+from .study_chart import write_chart
 from .yamlfile import LocatedDict, load_yaml
 
 STUDY_KEYS = ("description", "base", "metrics", "outputs", "columns", "inputs", "variants")
@@ -151,8 +152,6 @@ def run_study(
             row["wall_s"] = round(time.perf_counter() - t0, 3)
             rows.append(row)
     write_tables(rows, out_dir)
-    from .study_chart import write_chart
-
     write_chart(rows, out_dir, study.get("columns"), title=str(study.get("description") or path.stem))
     return rows
 

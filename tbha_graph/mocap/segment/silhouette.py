@@ -107,6 +107,7 @@ def background_model(samples: np.ndarray, actor: np.ndarray, min_samples: int) -
     with at least ``min_samples`` such samples."""
     k, h, w = samples.shape[:3]
     free = ~actor
+    count = free.sum(axis=0)  # free samples per pixel
     bg = np.empty((h, w, 3), dtype=np.float32)
     rows = max(1, (8 << 20) // max(k * w * 3 * 4, 1))  # strips of about 8 MB of float32 samples
     for r in range(0, h, rows):
@@ -114,14 +115,13 @@ def background_model(samples: np.ndarray, actor: np.ndarray, min_samples: int) -
         f = free[:, r:r + rows]
         s[~f] = np.inf  # the actor's samples sort after the free ones
         s.sort(axis=0)
-        c = f.sum(axis=0)[..., None]  # free samples per pixel
+        c = count[r:r + rows, :, None]
         lo, hi = np.maximum((c - 1) // 2, 0), c // 2  # the middle one (c odd) or two (c even) of the sorted free ones
         # np.nanmedian's values (8-bit samples: their medians are whole or half numbers, exact in float32), 3.5x
         # faster; a pixel with no free sample gets 0, not kept: with fewer than min_samples free samples it is not
         # `known` and is painted in below
         med = 0.5 * (np.take_along_axis(s, lo[None], 0)[0] + np.take_along_axis(s, hi[None], 0)[0])
         bg[r:r + rows] = np.where(c > 0, med, 0.0)
-    count = free.sum(axis=0)
     known = count >= min_samples
     if not known.all():  # the actor is always near: the background there painted in from around it
         bg = cv2.inpaint(np.clip(np.rint(bg), 0, 255).astype(np.uint8), (~known).astype(np.uint8), 5,
