@@ -3,8 +3,10 @@ takes: the sample, three CMU clips from other cameras, twelve turning takes in b
 
 The default pipeline runs on each take (its nodes from the user cache, run where missing: the first run solves
 every take, ~20 s each); for the solver's joints (``smooth.motion``) and the exported ones (``joints.joints3d``,
-where the BVH puts them) with ``rotations.feet_reach`` on and off it prints per take and as means over the takes
-(``name=value``):
+where the BVH puts them) in three variants of ``rotations``: ``export_swung`` (the torso's reference vectors matched
+exactly, every limb bone swung: ``torso_fit`` and ``feet_reach`` off), ``export_reach`` (the knees bent so the
+ankles land on the solver's: ``feet_reach`` on) and ``export_fit`` (the default: the torso fitted by least squares
+too, ``torso_fit``), it prints per take and as means over the takes (``name=value``):
 
 * ``*_seq_mm``: seq-MPJPE (one rigid alignment of the whole take, no scale), ``*_pa_mm``: PA-MPJPE (per frame,
   similarity), both against the render's truth;
@@ -29,7 +31,10 @@ from tbha_graph.core.runner import run_graph  # noqa: E402
 from tbha_graph.mocap.evaluate.measures import align_clip, procrustes_per_frame  # noqa: E402
 from tbha_graph.mocap.evaluate.metrics import floor_figures  # noqa: E402
 
-VARIANTS = ("motion", "export_swung", "export_reach")
+VARIANTS = ("motion", "export_swung", "export_reach", "export_fit")
+#: ``rotations`` params of each exported variant
+ROTATIONS = {"export_swung": {"feet_reach": False, "torso_fit": False}, "export_reach": {"feet_reach": True, "torso_fit": False},
+             "export_fit": {"feet_reach": True, "torso_fit": True}}
 
 
 def figures(joints: np.ndarray, truth: np.ndarray, fps: float) -> dict:
@@ -44,17 +49,16 @@ def figures(joints: np.ndarray, truth: np.ndarray, fps: float) -> dict:
 def score(take, cache: Cache) -> dict[str, dict]:
     """``{variant: figures}`` of one take (:data:`VARIANTS`)."""
     out = {}
-    for reach in (False, True):
-        graph, truth_ref = take_graph(take, node_sets={"rotations.feet_reach": reach})
+    for variant, params in ROTATIONS.items():
+        graph, truth_ref = take_graph(take, node_sets={f"rotations.{k}": v for k, v in params.items()})
         run = run_graph(graph, outputs=["smooth", "joints", truth_ref.split(".")[0]], cache=cache)
         motion = run.output("smooth.motion")
         joints = np.asarray(motion["joints"], dtype=np.float64)
         truth = np.asarray(run.output(truth_ref)["joints3d_world"], dtype=np.float64)[: len(joints)]
-        exported = np.asarray(run.output("joints.joints3d")["joints"], dtype=np.float64)
         fps = float(motion["fps"])
-        if not reach:
+        if "motion" not in out:
             out["motion"] = figures(joints, truth, fps)
-        out["export_reach" if reach else "export_swung"] = figures(exported, truth, fps)
+        out[variant] = figures(np.asarray(run.output("joints.joints3d")["joints"], dtype=np.float64), truth, fps)
     return out
 
 

@@ -32,8 +32,10 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from ..kinematics import forward_kinematics
 from ..skeleton import CHILDREN, JOINT_INDEX, N_JOINTS, PARENTS, TPOSE_DIRECTIONS, measure_bone_lengths
 from ..quat import conj, continuous, dot, from_axis_angle, identity, quat_apply, quat_mul, shortest_arc, swing_twist, unit
+from .reach import reach_feet
 from .rest import HINGES, LEAVES, TORSO, TorsoReference, TorsoRest, end_offsets, rest_offsets
 
 #: joints with exactly one child, grouped so that parents are solved before children
@@ -73,6 +75,11 @@ class SolverParams(BaseModel):
     )
     end_length: float = Field(0.1, gt=0, le=1, description="End Site length of head and wrists", json_schema_extra={"unit": "m"})
     foot_length: float = Field(0.15, gt=0, le=1, description="End Site length of the ankles (a foot pointing forward)", json_schema_extra={"unit": "m"})
+    torso_fit: bool = Field(
+        True, description="refine the hips and chest rotations and the hips' position frame by frame (least squares) so "
+                          "that all 16 joints land as close to the motion's as the rigid torso allows (rotations.torso_fit); "
+                          "false: the reference vectors matched exactly and the others' miss carried by everything below them"
+    )
     feet_reach: bool = Field(
         True, description="bend the knees so the ankles land on the motion's, from where the rigid pelvis puts the hip joints "
                           "(two-bone IK in the motion's knee plane: the feet stay where they were planted); false: thigh and shin "
@@ -118,6 +125,25 @@ def solve_swings(world: np.ndarray, joints: np.ndarray, rest_dir: np.ndarray, p:
             _hinge_twist(world, joints, p)
     for j in LEAVES:
         world[:, j] = world[:, PARENTS[j]]
+
+
+def pose_from_torso(torso_world: np.ndarray, joints: np.ndarray, offsets: np.ndarray, p: SolverParams) -> np.ndarray:
+    """World rotations ``(n, 16, 4)``: ``torso_world``'s ``hips`` and ``chest`` kept, the other joints swung to the
+    motion ``joints`` ``(n, 16, 3)`` (:func:`solve_swings`; the legs first re-placed to reach its ankles with
+    ``p.feet_reach``, :func:`.reach.reach_feet`) for rest ``offsets`` ``(16, 3)``."""
+    world = torso_world.copy()
+    solve_swings(world, reach_feet(world, joints, offsets) if p.feet_reach else joints, rest_directions(offsets), p)
+    return world
+
+
+def posed_joints(world: np.ndarray, root: np.ndarray, offsets: np.ndarray, p: SolverParams) -> np.ndarray:
+    """Positions ``(n, 16, 3)`` where the exported skeleton puts the joints: forward kinematics of world rotations
+    ``world`` ``(n, 16, 4)`` (their local rotations, hinge-projected with ``p.hinge_projection``, as
+    :func:`rotations_bundle` writes them) from the root positions ``root`` ``(n, 3)``."""
+    local = local_from_world(world)
+    if p.hinge and p.hinge_projection:
+        local = project_hinges(local)
+    return forward_kinematics(PARENTS, offsets, local, root)[0]
 
 
 def _smoothstep(x: np.ndarray) -> np.ndarray:

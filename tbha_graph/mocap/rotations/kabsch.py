@@ -8,6 +8,8 @@ chest, 3 per leg), so the sum is the squared position error the torso rotation c
 ``"equal"`` weighs the three children alike. Single-child joints have a rank-one problem whose
 smallest solution is the shortest arc, and they share the hinge refinement, leaves and output
 conventions of :mod:`.common`.
+With ``torso_fit`` (default) the Kabsch rotations are the start of the same least-squares fit as
+:mod:`.quaternion`'s (:mod:`.torso_fit`), and both solvers end at the same optimum; they differ with it off.
 """
 from __future__ import annotations
 
@@ -21,9 +23,9 @@ from ..bundles.motion import motion_joints
 from ..ports import MOTION, ROTATIONS
 from ..rigid import procrustes
 from ..skeleton import CHILDREN
-from .common import SolverParams, empty_world, rest_directions, rest_skeleton, rotations_bundle, solve_swings
-from .reach import reach_feet
+from .common import SolverParams, empty_world, pose_from_torso, rest_skeleton, rotations_bundle
 from .rest import TORSO
+from .torso_fit import fit_torso
 
 
 class KabschParams(SolverParams):
@@ -57,11 +59,12 @@ def kabsch_rotations(joints: np.ndarray, fps: float, params: KabschParams | None
         w = np.array([float(_subtree_size(k)) if p.weights == "subtree" else 1.0 for k in c])
         r = kabsch(offsets[c], joints[:, c] - joints[:, j : j + 1], w)
         world[:, j] = Rotation.from_matrix(r).as_quat()
-    solve_swings(world, reach_feet(world, joints, offsets) if p.feet_reach else joints, rest_directions(offsets), p)
-    return rotations_bundle(world, joints, offsets, fps, p)
+    if p.torso_fit:
+        world, joints = fit_torso(world, joints, offsets, p)
+    return rotations_bundle(pose_from_torso(world, joints, offsets, p), joints, offsets, fps, p)
 
 
-@node("rotations.kabsch", version=2, inputs={"motion": MOTION}, outputs={"rotations": ROTATIONS}, params=KabschParams)
+@node("rotations.kabsch", version=3, inputs={"motion": MOTION}, outputs={"rotations": ROTATIONS}, params=KabschParams)
 def kabsch_node(ctx, motion):
     """Joint rotations from 3D joint positions by least-squares (Kabsch) alignment of the torso, hinge limbs."""
     joints, fps = motion_joints(motion)

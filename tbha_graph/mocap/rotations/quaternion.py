@@ -10,9 +10,12 @@ refinement, :mod:`.rest` for the rest skeleton):
   point" — the shortest arc from the rest to the current bone direction.
 * elbows/knees as hinges and upper arm/thigh twist from the limb plane: seed 002 axis limits.
 * head, wrists, ankles: local identity.
+* then (``torso_fit``, default) the hips' position and the hips' and chest's rotations refined frame by frame so
+  that all 16 joints land as close to the motion's as the rigid torso allows (:mod:`.torso_fit`): the reference
+  vectors above are its start.
 
 Output: the ROTATIONS bundle (``local_quat`` xyzw relative to the parent, identity in the rest T-pose,
-continuous in time; ``root_position`` = the hips trajectory; constant ``offsets`` from median bone
+continuous in time; ``root_position`` = the hips trajectory, moved by the torso fit; constant ``offsets`` from median bone
 lengths; ``end_offsets``; ``fps``). Never NaN: degenerate geometry (straight limbs, zero-length bones,
 collinear torso points) falls back as documented in :mod:`.quat`.
 """
@@ -23,10 +26,10 @@ import numpy as np
 from ...core.node import node
 from ..bundles.motion import motion_joints
 from ..ports import MOTION, ROTATIONS
-from .common import SolverParams, empty_world, rest_directions, rest_skeleton, rotations_bundle, solve_swings
+from .common import SolverParams, empty_world, pose_from_torso, rest_skeleton, rotations_bundle
 from ..quat import rotation_from_pairs
-from .reach import reach_feet
 from .rest import TORSO, TorsoReference, rest_points, torso_vectors
+from .torso_fit import fit_torso
 
 
 class QuaternionParams(SolverParams):
@@ -52,11 +55,12 @@ def quaternion_rotations(joints: np.ndarray, fps: float, params: SolverParams | 
     world = empty_world(joints.shape[0])
     for j, q in torso_rotations(joints, offsets, p.references).items():
         world[:, j] = q
-    solve_swings(world, reach_feet(world, joints, offsets) if p.feet_reach else joints, rest_directions(offsets), p)
-    return rotations_bundle(world, joints, offsets, fps, p)
+    if p.torso_fit:
+        world, joints = fit_torso(world, joints, offsets, p)
+    return rotations_bundle(pose_from_torso(world, joints, offsets, p), joints, offsets, fps, p)
 
 
-@node("rotations.quaternion", version=2, inputs={"motion": MOTION}, outputs={"rotations": ROTATIONS}, params=QuaternionParams)
+@node("rotations.quaternion", version=3, inputs={"motion": MOTION}, outputs={"rotations": ROTATIONS}, params=QuaternionParams)
 def quaternion(ctx, motion):
     """Joint rotations (BVH-ready) from 3D joint positions by the seed 002 quaternion method with hinge limits."""
     joints, fps = motion_joints(motion)
