@@ -1,11 +1,13 @@
 """Benchmark: rotation solvers and motion filters on real CMU motion. Prints ``name=value`` lines.
 
 Speed: CMU 131_02 (16 joints) tiled to 10,000 frames; figures are the median of 7 runs divided by the
-number of frames (all 16 joints of one frame). Accuracy, on each trimmed clip in data/mocap/cmu with
+number of frames (all 16 joints of one frame). The solvers are timed with ``torso_fit`` off (the seed's reference
+rotations); ``quaternion_torso_fit_us_per_frame`` is the default (the torso fitted by least squares), on the first
+2,000 frames, median of 3 runs. Accuracy, on each trimmed clip in data/mocap/cmu with
 bone lengths made constant (filter.bone_length):
 
 * ``<solver>_mpjpe_mm_<clip>``: mean joint position error of the re-posed skeleton (forward kinematics
-  of the solved rotations) against the input positions, millimetres.
+  of the solved rotations) against the input positions, millimetres (``quaternion_exact``: ``torso_fit`` off).
 * ``quaternion_deg_<joint>_<clip>``: mean angle between the solved world rotation of a joint and the
   CMU joint's own (``rotations16_from_bvh``), after removing the constant difference of the two rest
   poses; ``..._nohinge_...`` the same without the hinge refinement (shortest arcs only);
@@ -35,6 +37,7 @@ from tbha_graph.mocap.rotations.quaternion import QuaternionParams, quaternion_r
 DATA = Path(__file__).resolve().parents[1] / "data" / "mocap" / "cmu"
 CLIPS = ("131_01", "131_02", "131_03")
 N_FRAMES = 10_000
+FIT_FRAMES = 2_000
 COMPARED = ("hips", "chest", "neck", "left_shoulder", "right_shoulder", "left_elbow", "right_elbow",
             "left_hip", "right_hip", "left_knee", "right_knee")
 
@@ -70,15 +73,19 @@ def speed() -> None:
     joints = np.tile(m["joints"], (reps, 1, 1))[:N_FRAMES]
     fps = float(m["fps"])
     print(f"frames={N_FRAMES}")
+    exact = QuaternionParams(torso_fit=False)
     for name, fn in (
-        ("quaternion", lambda: quaternion_rotations(joints, fps)),
-        ("kabsch", lambda: kabsch_rotations(joints, fps)),
+        ("quaternion", lambda: quaternion_rotations(joints, fps, exact)),
+        ("kabsch", lambda: kabsch_rotations(joints, fps, KabschParams(torso_fit=False))),
         ("one_euro", lambda: one_euro_filter(joints, fps)),
         ("butterworth", lambda: butterworth_lowpass(joints, fps, 7.0, 4)),
         ("bone_length", lambda: constant_bone_lengths(joints)),
     ):
         fn()
         print(f"{name}_us_per_frame={median_seconds(fn) / N_FRAMES * 1e6:.2f}")
+    # the torso's least-squares fit (the default, rotations.torso_fit) costs far more: timed on the first FIT_FRAMES
+    part = joints[:FIT_FRAMES]
+    print(f"quaternion_torso_fit_us_per_frame={median_seconds(lambda: quaternion_rotations(part, fps), 3) / FIT_FRAMES * 1e6:.0f}")
 
 
 def accuracy() -> None:
@@ -89,6 +96,7 @@ def accuracy() -> None:
         truth = rotations16_from_bvh(path)
         for solver, rot in (
             ("quaternion", quaternion_rotations(joints, fps)),
+            ("quaternion_exact", quaternion_rotations(joints, fps, QuaternionParams(torso_fit=False))),
             ("kabsch", kabsch_rotations(joints, fps, KabschParams())),
         ):
             pos, _ = fk(rot)

@@ -351,3 +351,15 @@ def test_torso_fit_puts_every_joint_as_close_as_the_rigid_torso_allows(spec, cmu
     again, _ = fk(solve(spec, turned))
     back = turn.inv().apply(again.reshape(-1, 3)).reshape(again.shape)
     assert np.abs(back - fitted).max() < 1e-7  # metres; measured 3e-8
+
+
+def test_torso_fit_in_chunks_of_frames_gives_the_same_skeleton(cmu, monkeypatch):
+    """Frames are fitted a chunk at a time (memory flat with the take's length); each frame is its own problem, so
+    the chunks change nothing but where each chunk stops iterating."""
+    from tbha_graph.mocap.rotations import torso_fit
+
+    motion = folding_pelvis(cmu)
+    whole, _ = fk(solve(quaternion, motion))
+    monkeypatch.setattr(torso_fit, "CHUNK", 100)  # 720 frames: eight chunks, the last of 20
+    chunked, _ = fk(solve(quaternion, motion))
+    assert np.abs(chunked - whole).max() < 1e-7  # metres

@@ -27,6 +27,8 @@ from .common import SolverParams, pose_from_torso, posed_joints
 
 #: unknowns per frame: hips shift (3), hips correction (3), chest correction (3)
 N_UNKNOWNS = 9
+#: frames fitted at once (each is its own problem): bounds the memory of the Jacobians' batch of ten posings
+CHUNK = 1024
 
 
 def rotation_quat(rotvec: np.ndarray) -> np.ndarray:
@@ -59,42 +61,57 @@ def fit_torso(torso_world: np.ndarray, joints: np.ndarray, offsets: np.ndarray, 
     """``(torso_world, joints)`` refined (module doc): world rotations ``(n, 16, 4)`` whose ``hips`` and ``chest``
     are corrected, and the motion's joints ``(n, 16, 3)`` with the hips moved to where the skeleton's root goes.
     ``offsets`` ``(16, 3)`` the rest skeleton; ``iterations`` Jacobians at most; ``step`` the finite difference
-    (metres and radians); stops when no frame's cost falls by more than ``tol`` of itself."""
+    (metres and radians); stops when no frame's cost falls by more than ``tol`` of itself. Frames are fitted
+    :data:`CHUNK` at a time, so memory stays flat however long the take."""
+    x = np.zeros((joints.shape[0], N_UNKNOWNS))
+    for a in range(0, joints.shape[0], CHUNK):
+        rows = slice(a, a + CHUNK)
+        x[rows] = fitted_unknowns(torso_world[rows], joints[rows], offsets, p, iterations, step, tol)
+    return corrected(x, torso_world, joints)
+
+
+def fitted_unknowns(torso_world: np.ndarray, joints: np.ndarray, offsets: np.ndarray, p: SolverParams,
+                    iterations: int, step: float, tol: float) -> np.ndarray:
+    """The nine unknowns ``(n, 9)`` of every frame (module doc) by Levenberg–Marquardt (see :func:`fit_torso`). Each
+    frame iterates until its own cost stops falling (by ``tol`` of itself), so its answer does not depend on which
+    other frames are fitted with it."""
     n = joints.shape[0]
-    if n == 0:
-        return torso_world, joints
     x = np.zeros((n, N_UNKNOWNS))
-    batch_world = np.concatenate([torso_world] * (N_UNKNOWNS + 1))
-    batch_joints = np.concatenate([joints] * (N_UNKNOWNS + 1))
     probes = np.concatenate([np.zeros((1, N_UNKNOWNS)), step * np.eye(N_UNKNOWNS)])  # (10, 9)
     r = misses(x, torso_world, joints, offsets, p)
     cost = np.einsum("ij,ij->i", r, r)
     damping = np.full(n, 1e-3)
     eye = np.eye(N_UNKNOWNS)
+    active = np.arange(n)  # frames still iterating
     for _ in range(iterations):
-        batch = (x[None] + probes[:, None]).reshape(-1, N_UNKNOWNS)
-        R = misses(batch, batch_world, batch_joints, offsets, p).reshape(N_UNKNOWNS + 1, n, -1)
-        jac = np.moveaxis((R[1:] - R[:1]) / step, 0, -1)  # (n, 48, 9)
+        if active.size == 0:
+            break
+        world, target = torso_world[active], joints[active]
+        batch = (x[active][None] + probes[:, None]).reshape(-1, N_UNKNOWNS)
+        R = misses(batch, np.concatenate([world] * len(probes)), np.concatenate([target] * len(probes)), offsets,
+                   p).reshape(len(probes), active.size, -1)
+        jac = np.moveaxis((R[1:] - R[:1]) / step, 0, -1)  # (k, 48, 9)
         jt = np.swapaxes(jac, 1, 2)
         A = jt @ jac
-        g = (jt @ r[..., None])[..., 0]
-        gain = np.zeros(n)
-        todo = np.ones(n, dtype=bool)  # frames still looking for a step from this linearisation
+        g = (jt @ r[active][..., None])[..., 0]
+        gain = np.zeros(active.size)
+        todo = np.arange(active.size)  # frames (of active) still looking for a step from this linearisation
         for _ in range(4):  # damping raised where a step fails, lowered where it succeeds
-            D = A + damping[:, None, None] * (eye * np.diagonal(A, axis1=1, axis2=2)[:, None, :]) + 1e-12 * eye
-            dx = -np.linalg.solve(D, g[..., None])[..., 0]
-            r_new = misses(x + dx, torso_world, joints, offsets, p)
+            f = active[todo]
+            D = A[todo] + damping[f, None, None] * (eye * np.diagonal(A[todo], axis1=1, axis2=2)[:, None, :]) + 1e-12 * eye
+            dx = -np.linalg.solve(D, g[todo][..., None])[..., 0]
+            r_new = misses(x[f] + dx, world[todo], target[todo], offsets, p)
             c_new = np.einsum("ij,ij->i", r_new, r_new)
-            ok = todo & (c_new < cost)  # NaN never passes
-            gain[ok] = (cost[ok] - c_new[ok]) / np.maximum(cost[ok], 1e-30)
-            x[ok] += dx[ok]
-            r[ok] = r_new[ok]
-            cost[ok] = c_new[ok]
-            damping[ok] *= 0.3
-            damping[todo & ~ok] *= 10.0
-            todo &= ~ok
-            if not todo.any():
+            ok = c_new < cost[f]  # NaN never passes
+            good = f[ok]
+            gain[todo[ok]] = (cost[good] - c_new[ok]) / np.maximum(cost[good], 1e-30)
+            x[good] += dx[ok]
+            r[good] = r_new[ok]
+            cost[good] = c_new[ok]
+            damping[good] *= 0.3
+            damping[f[~ok]] *= 10.0
+            todo = todo[~ok]
+            if todo.size == 0:
                 break
-        if gain.max() < tol:
-            break
-    return corrected(x, torso_world, joints)
+        active = active[gain >= tol]
+    return x
