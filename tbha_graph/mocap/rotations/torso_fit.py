@@ -61,7 +61,7 @@ def fit_torso(torso_world: np.ndarray, joints: np.ndarray, offsets: np.ndarray, 
     """``(torso_world, joints)`` refined (module doc): world rotations ``(n, 16, 4)`` whose ``hips`` and ``chest``
     are corrected, and the motion's joints ``(n, 16, 3)`` with the hips moved to where the skeleton's root goes.
     ``offsets`` ``(16, 3)`` the rest skeleton; ``iterations`` Jacobians at most; ``step`` the finite difference
-    (metres and radians); stops when no frame's cost falls by more than ``tol`` of itself. Frames are fitted
+    (metres and radians); each frame stops when its cost falls by less than ``tol`` of itself. Frames are fitted
     :data:`CHUNK` at a time, so memory stays flat however long the take."""
     x = np.zeros((joints.shape[0], N_UNKNOWNS))
     for a in range(0, joints.shape[0], CHUNK):
