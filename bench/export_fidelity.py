@@ -31,10 +31,10 @@ from tbha_graph.core.runner import run_graph  # noqa: E402
 from tbha_graph.mocap.evaluate.measures import align_clip, procrustes_per_frame  # noqa: E402
 from tbha_graph.mocap.evaluate.metrics import floor_figures  # noqa: E402
 
-VARIANTS = ("motion", "export_swung", "export_reach", "export_fit")
 #: ``rotations`` params of each exported variant
 ROTATIONS = {"export_swung": {"feet_reach": False, "torso_fit": False}, "export_reach": {"feet_reach": True, "torso_fit": False},
              "export_fit": {"feet_reach": True, "torso_fit": True}}
+VARIANTS = ("motion", *ROTATIONS)
 
 
 def figures(joints: np.ndarray, truth: np.ndarray, fps: float) -> dict:

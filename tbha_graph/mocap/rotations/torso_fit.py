@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..quat import quat_mul
+from ..quat import from_axis_angle, quat_mul
 from .common import SolverParams, pose_from_torso, posed_joints
 
 #: unknowns per frame: hips shift (3), hips correction (3), chest correction (3)
@@ -32,10 +32,9 @@ CHUNK = 1024
 
 
 def rotation_quat(rotvec: np.ndarray) -> np.ndarray:
-    """Quaternions xyzw ``(..., 4)`` of rotation vectors ``(..., 3)`` (radians)."""
-    from scipy.spatial.transform import Rotation
-
-    return Rotation.from_rotvec(rotvec.reshape(-1, 3)).as_quat().reshape(rotvec.shape[:-1] + (4,))
+    """Quaternions xyzw ``(..., 4)`` of rotation vectors ``(..., 3)`` (radians; zero: the identity)."""
+    angle = np.sqrt(np.einsum("...i,...i->...", rotvec, rotvec))
+    return from_axis_angle(rotvec / np.where(angle > 0, angle, 1.0)[..., None], angle)
 
 
 def corrected(x: np.ndarray, torso_world: np.ndarray, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
